@@ -1,0 +1,55 @@
+"""What the generator can produce: every element x law x quadrature that makes sense."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .. import laws
+from .elements import ELEMENTS
+from .ir import EXACT, exact_degree
+from .quadrature import GAUSS_RULES
+
+
+@dataclass(frozen=True, order=True)
+class Entry:
+    element: str
+    law: str
+    quadrature: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.element}_{self.law}_{self.quadrature}"
+
+
+def quadratures(element: str, law: str) -> list[str]:
+    """gauss1..3 everywhere; 'exact' where the integrand is a polynomial (Hooke, StVK on simplices)."""
+    names = list(GAUSS_RULES)
+    if exact_degree(element, laws.get(law)) is not None:
+        names.append(EXACT)
+    return names
+
+
+def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]:
+    """Catalogue entries, sorted, filtered by the given names (None = all). Unknown names raise."""
+    elements = _check("element", elements, sorted(ELEMENTS))
+    law_names = _check("law", law_names, laws.names())
+    found = []
+    for e in elements:
+        for law in law_names:
+            for q in quadratures(e, law):
+                if quadrature_names is None or q in quadrature_names:
+                    found.append(Entry(e, law, q))
+    if quadrature_names is not None:
+        known = {q for e in elements for law in law_names for q in quadratures(e, law)}
+        unknown = sorted(set(quadrature_names) - known)
+        if unknown:
+            raise ValueError(f"unknown quadrature {', '.join(unknown)}; available: {', '.join(sorted(known))}")
+    return sorted(found)
+
+
+def _check(kind, given, known):
+    if given is None:
+        return known
+    unknown = [g for g in given if g not in known]
+    if unknown:
+        raise ValueError(f"unknown {kind} {', '.join(unknown)}; known: {', '.join(known)}")
+    return sorted(set(given))

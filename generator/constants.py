@@ -1,0 +1,78 @@
+"""Per-element constants: everything that depends only on rest geometry and material.
+
+Two sources, both computed once by the generated ``constants`` kernel (the
+thesis' Algorithm 3: the per-step code then reads only D and u):
+- rest geometry at each integration point: v = w det J and the physical shape
+  gradients G_i = J^-T grad_xi N_i (J = dX/dxi of the rest configuration);
+- subexpressions of the law code that involve only material parameters
+  (lam/2, 2 mu, alpha of stable neo-Hookean, ...), found by ``hoist``.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+
+def rest_symbols(n_nodes: int, dim: int) -> sp.Matrix:
+    """X_i_k: rest coordinate k of node i."""
+    return sp.Matrix(n_nodes, dim, lambda i, k: sp.Symbol(f"X{i}_{k}", real=True))
+
+
+def point_geometry(dN: sp.Matrix, weight, X: sp.Matrix, q: int):
+    """Straight-line code for the rest geometry at one point.
+
+    dN (n x dim) holds the reference shape gradients evaluated at the point.
+    Returns (temporaries, outputs): J = dX/dxi, its determinant and inverse go
+    through named temporaries, so the code is the same small shape at every
+    point (no symbolic inverse of a 3x3 matrix of sums to simplify).
+    Outputs: v = w det J, then G_i_b = (dN J^-1)_ib, then detJ.
+    """
+    n, dim = dN.shape
+    J = X.T * dN                                   # J[a, k] = sum_i X_ia dN_ik
+    Js = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"J{q}_{a}{k}", real=True))
+    detJ = sp.Symbol(f"detJ{q}", real=True)
+    inv = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"Ji{q}_{a}{k}", real=True))
+    adj = Js.adjugate()
+    temps = [(Js[a, k], J[a, k]) for a in range(dim) for k in range(dim)]
+    temps.append((detJ, Js.det()))
+    temps += [(inv[a, k], adj[a, k] / detJ) for a in range(dim) for k in range(dim)]
+    G = dN * inv                                   # G[i, b] = sum_k dN_ik Jinv[k, b]
+    outputs = [("v", weight * detJ)] + [(f"G_{i}_{b}", G[i, b]) for i in range(n) for b in range(dim)]
+    return temps, outputs + [("detJ", detJ)]
+
+
+def hoist(exprs: list[sp.Expr], rest: set[sp.Symbol], prefix: str = "c"):
+    """Replace every maximal subexpression that involves only ``rest`` symbols by a constant.
+
+    Returns (new expressions, [(constant symbol, expression in rest symbols)]).
+    Within a sum or product the rest-only arguments are grouped, so that
+    mu/2 * x * y hoists mu/2 even though sympy stores it as Mul(1/2, mu, x, y).
+    """
+    table: dict[sp.Expr, sp.Symbol] = {}
+    order: list[tuple[sp.Symbol, sp.Expr]] = []
+
+    def constant(e: sp.Expr) -> sp.Expr:
+        if e.is_Atom:
+            return e
+        if e not in table:
+            table[e] = sp.Symbol(f"{prefix}{len(order)}", real=True)
+            order.append((table[e], e))
+        return table[e]
+
+    def is_rest(e: sp.Expr) -> bool:
+        return e.free_symbols <= rest
+
+    def visit(e: sp.Expr) -> sp.Expr:
+        if e.is_Atom:
+            return e
+        if is_rest(e):
+            return constant(e)
+        if isinstance(e, (sp.Add, sp.Mul)):
+            fixed = [a for a in e.args if is_rest(a)]
+            moving = [visit(a) for a in e.args if not is_rest(a)]
+            # A lone number stays a literal; anything else rest-only becomes a constant.
+            if len(fixed) > 1 or (fixed and not fixed[0].is_Number):
+                fixed = [constant(e.func(*fixed))]
+            return e.func(*fixed, *moving)
+        return e.func(*[visit(a) for a in e.args])
+
+    return [visit(e) for e in exprs], order

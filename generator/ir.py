@@ -1,0 +1,248 @@
+"""KernelIR: everything a template needs to emit one (element, law, quadrature) kernel.
+
+Built from the earlier stages, language neutral (sympy expressions and names);
+a backend only prints it. The per-element constant vector D is laid out as
+  [point 0: v, G_0_0 .. G_{n-1}_{dim-1}] [point 1: ...] ... [material constants]
+so that the per-step code reads D and u only.
+"""
+from __future__ import annotations
+
+import hashlib
+from fractions import Fraction
+import inspect
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from .. import laws as laws_pkg
+from . import GENERATOR_VERSION
+from .constants import hoist, point_geometry, rest_symbols
+from .derivatives import law_derivatives
+from .elements import element as get_element
+from .fragments import DEFAULT_MAX_OPS, Fragment, eliminate, split
+from .quadrature import QuadratureRule, rule as get_rule, rule_for_degree
+
+EXACT = "exact"
+
+
+@dataclass
+class KernelIR:
+    name: str
+    element: str
+    law: str
+    quadrature: str
+    dim: int
+    n_nodes: int
+    n_points: int
+    parameters: tuple            # native law parameters: inputs of the constants kernel
+    requires_positive_J: bool
+    affine_edges: tuple          # (mid, a, b) node triples checked for straight edges ("exact" only)
+    point_stride: int
+    material_offset: int
+    material_names: tuple        # material constants stored after the geometry
+    constant_names: tuple        # names of every column of D
+    geometry: tuple              # one Fragment per point: outputs v, G_i_b (in D order), detJ
+    material: Fragment           # material constants from the parameters
+    law_code: dict               # variant -> list[Fragment]: energy, gradient, tangent, gradient_tangent
+    J: sp.Expr | None            # det F from the F symbols, for the inversion check
+    chain: dict                  # chain-rule statements (forces, tangent H, stiffness K)
+    rule_points: tuple
+    rule_weights: tuple
+    ops: dict = field(default_factory=dict)
+    input_hash: str = ""
+
+    @property
+    def n_dofs(self) -> int:
+        return self.n_nodes * self.dim
+
+    @property
+    def n_constants(self) -> int:
+        return len(self.constant_names)
+
+
+def resolve_rule(element_name: str, law, quadrature: str) -> QuadratureRule:
+    """The integration rule behind a quadrature name.
+
+    "exact" integrates the polynomial integrand exactly: its degree is found
+    symbolically (law degree in F times the degree of F in xi on an affine
+    simplex) and a rule of at least that degree is used; the generated
+    constants kernel refuses curved (non-affine) elements for it.
+    """
+    if quadrature != EXACT:
+        return get_rule(element_name, quadrature)
+    degree = exact_degree(element_name, law)
+    if degree is None:
+        raise ValueError(f"quadrature 'exact' needs a polynomial integrand: law {law.name!r} on "
+                         f"{element_name!r} is not polynomial (use gauss1, gauss2, gauss3)")
+    return rule_for_degree(element_name, degree)
+
+
+def law_degree(law) -> int | None:
+    """Total degree of W in the entries of F, or None when W is not polynomial."""
+    d = law_derivatives(law, 3)
+    flat = [s for row in d.F for s in row]
+    expr = sp.expand(d.W)
+    if not expr.is_polynomial(*flat):
+        return None
+    return sp.Poly(expr, *flat).total_degree()
+
+
+def exact_degree(element_name: str, law) -> int | None:
+    ref = get_element(element_name)
+    if not ref.simplex:
+        return None
+    degree = law_degree(law)
+    return None if degree is None else degree * (ref.order - 1)
+
+
+def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = DEFAULT_MAX_OPS) -> KernelIR:
+    ref = get_element(element_name)
+    law = laws_pkg.get(law_name)
+    rule = resolve_rule(element_name, law, quadrature)
+    dim, n = ref.dim, ref.n_nodes
+    deriv = law_derivatives(law, dim)
+
+    geometry, names = _geometry(ref, rule)
+    law_code, material, J = _law_code(deriv, law, max_ops)
+    stride = 1 + n * dim
+    material_names = tuple(name for name, _ in material.outputs)
+    ir = KernelIR(
+        name=f"{element_name}_{law_name}_{quadrature}",
+        element=element_name, law=law_name, quadrature=quadrature,
+        dim=dim, n_nodes=n, n_points=rule.n_points,
+        parameters=tuple(law.parameters),
+        requires_positive_J=law.requires_positive_J,
+        affine_edges=_midside_edges(ref) if quadrature == EXACT else (),
+        point_stride=stride,
+        material_offset=stride * rule.n_points,
+        material_names=material_names,
+        constant_names=tuple(names) + material_names,
+        geometry=geometry,
+        material=material,
+        law_code=law_code,
+        J=J,
+        chain=_chain_rule(deriv),
+        rule_points=tuple(tuple(float(x) for x in p) for p in rule.points),
+        rule_weights=tuple(float(w) for w in rule.weights),
+    )
+    ir.ops = _op_counts(ir)
+    ir.input_hash = _input_hash(ref, rule, law)
+    return ir
+
+
+def _geometry(ref, rule):
+    X = rest_symbols(ref.n_nodes, ref.dim)
+    dN_symbolic = ref.gradients()
+    fragments, names = [], []
+    for q, (point, weight) in enumerate(zip(rule.points, rule.weights)):
+        at = dict(zip(ref.xi, point))
+        dN = dN_symbolic.subs(at).applyfunc(numeric)
+        temps, outputs = point_geometry(dN, numeric(weight), X, q)
+        names += [f"v[{q}]"] + [f"G[{q}][{i}][{b}]" for i in range(ref.n_nodes) for b in range(ref.dim)]
+        fragments.append(Fragment(tuple(temps), tuple(outputs)))
+    return tuple(fragments), names
+
+
+def numeric(x) -> sp.Expr:
+    """A rule-dependent number for code: exact when it is a short binary fraction, else 30 digits.
+
+    Keeping 1, 1/2, 1/8 ... exact lets sympy fold them (no 1.0*X in the code);
+    irrational Gauss points become floats, which is all the compiler needs.
+    """
+    x = sp.sympify(x)
+    if x.is_Rational and x.q <= 1024:
+        return x
+    value = sp.N(x, 30)
+    approx = Fraction(float(value)).limit_denominator(1024)
+    if abs(value - sp.Rational(approx.numerator, approx.denominator)) < 1e-25:
+        return sp.Rational(approx.numerator, approx.denominator)
+    return sp.Float(sp.N(x, 30), 30)
+
+
+def _law_code(deriv, law, max_ops):
+    dim = deriv.dim
+    P = [(f"P{a}{b}", deriv.P[a][b]) for a in range(dim) for b in range(dim)]
+    A = [(f"A{i}_{j}", e) for (i, j), e in sorted(deriv.A.items())]
+    everything = [("W", deriv.W)] + P + A
+    # Hoist parameter-only subexpressions once, over every output, so all
+    # variants share one set of material constants.
+    hoisted, constants = hoist([e for _, e in everything], set(deriv.params))
+    named = dict(zip([name for name, _ in everything], hoisted))
+    Pn = [(name, named[name]) for name, _ in P]
+    An = [(name, named[name]) for name, _ in A]
+    variants = {
+        "energy": [("W", named["W"])],
+        "gradient": Pn,
+        "tangent": An,
+        "gradient_tangent": Pn + An,
+    }
+    law_code = {k: split(v, f"t_{k[0]}", max_ops) for k, v in variants.items()}
+    # Material constants: the raw parameters the code still reads, then the hoisted ones.
+    used = set().union(*(e.free_symbols for e in hoisted))
+    raw = [(str(p), p) for p in deriv.params if p in used]
+    material = Fragment((), tuple(raw + [(str(c), e) for c, e in constants]))
+    J = deriv.J if law.requires_positive_J else None
+    return law_code, material, J
+
+
+def _chain_rule(deriv):
+    """f_i = -sum_q v P g_i ; K_ij = sum_q v g_i A g_j, written with symbols for one node pair."""
+    dim = deriv.dim
+    v = sp.Symbol("v", real=True)
+    gi = [sp.Symbol(f"gi{b}", real=True) for b in range(dim)]
+    gj = [sp.Symbol(f"gj{b}", real=True) for b in range(dim)]
+    P = [[sp.Symbol(f"P{a}{b}", real=True) for b in range(dim)] for a in range(dim)]
+
+    def A(a, b, c, d):
+        i, j = a * dim + b, c * dim + d
+        return sp.Symbol(f"A{min(i, j)}_{max(i, j)}", real=True)
+
+    forces = [(a, v * sum(P[a][b] * gi[b] for b in range(dim))) for a in range(dim)]
+    H = [(f"h{a}{c}{d}", v * sum(A(a, b, c, d) * gi[b] for b in range(dim)))
+         for a in range(dim) for c in range(dim) for d in range(dim)]
+    h = {(a, c, d): sp.Symbol(f"h{a}{c}{d}", real=True) for a in range(dim) for c in range(dim) for d in range(dim)}
+    K = [(a, c, sum(h[a, c, d] * gj[d] for d in range(dim))) for a in range(dim) for c in range(dim)]
+    return {"forces": forces, "H": H, "K": K}
+
+
+def _midside_edges(ref):
+    if ref.order != 2:
+        return ()
+    corners = ref.dim + 1
+    edges = []
+    for m in range(corners, ref.n_nodes):
+        mid = ref.nodes[m]
+        for a in range(corners):
+            for b in range(a + 1, corners):
+                if all(2 * mid[k] == ref.nodes[a][k] + ref.nodes[b][k] for k in range(ref.dim)):
+                    edges.append((m, a, b))
+    return tuple(edges)
+
+
+def _op_counts(ir: KernelIR) -> dict:
+    """Floating-point operations per element, per kernel (sympy's count_ops of the emitted code)."""
+    n, dim, nq = ir.n_nodes, ir.dim, ir.n_points
+    law = {k: sum(f.ops for f in v) for k, v in ir.law_code.items()}
+    F = 2 * n * dim * dim
+    forces = n * (2 * dim + 1) * dim                 # f_a = v sum_b P_ab g_b, per node
+    H = n * dim**3 * 2 * dim
+    pairs = n * (n + 1) // 2
+    K = pairs * dim * dim * 2 * dim
+    J = 14 if ir.J is not None else 0
+    return {
+        "constants": sum(f.ops for f in ir.geometry) + ir.material.ops,
+        "energy": nq * (F + J + law["energy"] + 2),
+        "forces": nq * (F + J + law["gradient"] + forces),
+        "stiffness": nq * (F + J + law["tangent"] + H + K),
+        "forces_and_stiffness": nq * (F + J + law["gradient_tangent"] + forces + H + K),
+    }
+
+
+def _input_hash(ref, rule, law) -> str:
+    """A hash of everything the generated text depends on (templates are added by the backend)."""
+    h = hashlib.sha256()
+    h.update(GENERATOR_VERSION.encode())
+    h.update(repr((ref.name, ref.nodes, [str(s) for s in ref.shape_functions])).encode())
+    h.update(repr((rule.name, [tuple(str(x) for x in p) for p in rule.points], [str(w) for w in rule.weights])).encode())
+    h.update(inspect.getsource(inspect.getmodule(law.energy)).encode())
+    return h.hexdigest()[:16]

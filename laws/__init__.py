@@ -1,0 +1,42 @@
+"""Constitutive laws: one small file per law, discovered automatically.
+
+A law file defines ``LAW = Law(...)``: the strain-energy density W(F) per unit
+rest volume written with sympy, its native parameters and how they follow from
+Young's modulus E and Poisson's ratio nu. Adding a law means adding one file to
+this folder; nothing else has to change.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from functools import lru_cache
+
+from .base import Law, LawError, lame_from_E_nu
+
+__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names"]
+
+
+@lru_cache(maxsize=None)
+def _registry() -> dict[str, Law]:
+    found: dict[str, Law] = {}
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.name.startswith("_") or info.name == "base":
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        law = getattr(module, "LAW", None)
+        if isinstance(law, Law):
+            found[law.name] = law
+    return dict(sorted(found.items()))
+
+
+def names() -> list[str]:
+    """Names of every known law, sorted."""
+    return list(_registry())
+
+
+def get(name: str) -> Law:
+    """The law called ``name``; a LawError naming the known laws otherwise."""
+    try:
+        return _registry()[name]
+    except KeyError:
+        raise LawError(f"unknown law {name!r}; known laws: {', '.join(names())}") from None

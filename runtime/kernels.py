@@ -1,0 +1,184 @@
+"""Load generated kernels and give them one friendly, checked API.
+
+    k = load_kernel("tetra", "stvk", "gauss1", backend="numba")
+    D = k.constants(X, E=1e6, nu=0.3)      # per-element constants, once
+    f, K = k.forces_and_stiffness(D, u)    # every step
+
+A kernel comes from the committed catalogue (tensormass.generated); a
+combination that is not there (a new law file, another rule) is generated on
+first use into the user cache and loaded from there.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import os
+import sys
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .. import laws
+from .errors import DegenerateElementError, InvertedElementError, KernelNotFoundError, TensormassError
+
+BACKENDS = ("numba", "c")
+
+
+def cache_dir() -> Path:
+    """Where kernels generated or compiled on demand live ($TENSORMASS_CACHE overrides)."""
+    from ..generator import GENERATOR_VERSION
+    root = os.environ.get("TENSORMASS_CACHE") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tensormass"
+    return Path(root) / GENERATOR_VERSION
+
+
+class Kernel:
+    """One element x law x quadrature kernel: constants once, then energy, forces, stiffness."""
+
+    def __init__(self, module, backend: str):
+        self.module = module
+        self.backend = backend
+        self.element = module.ELEMENT
+        self.law = module.LAW
+        self.quadrature = module.QUADRATURE
+        self.dim = module.DIM
+        self.n_nodes = module.N_NODES
+        self.n_points = module.N_POINTS
+        self.n_constants = module.N_CONSTANTS
+        self.parameters = tuple(module.PARAMETERS)
+        self.ops = dict(module.OPS)
+        self.n_dofs = self.n_nodes * self.dim
+
+    def __repr__(self):
+        return f"<Kernel {self.element}/{self.law}/{self.quadrature} ({self.backend})>"
+
+    # -- inputs -----------------------------------------------------------------------------
+    def _coords(self, X) -> np.ndarray:
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if X.ndim == 2:
+            X = X[None]
+        if X.shape[1:] != (self.n_nodes, self.dim):
+            raise TensormassError(f"{self.element}: rest coordinates must have shape (n_elem, {self.n_nodes}, {self.dim}), got {X.shape}")
+        if not np.all(np.isfinite(X)):
+            raise TensormassError(f"{self.element}: rest coordinates contain NaN or Inf")
+        return X
+
+    def _params(self, n: int, E, nu, native) -> np.ndarray:
+        values = laws.get(self.law).native_parameters(E=E, nu=nu, **native)
+        table = np.empty((n, len(self.parameters)))
+        for k, p in enumerate(self.parameters):
+            try:
+                table[:, k] = np.broadcast_to(values[p], (n,))
+            except ValueError:
+                raise TensormassError(f"parameter {p} must be a scalar or have one value per element ({n})") from None
+        return table
+
+    def _displacements(self, D, u):
+        D = np.ascontiguousarray(D, dtype=np.float64)
+        if D.ndim != 2 or D.shape[1] != self.n_constants:
+            raise TensormassError(f"{self}: constants must have shape (n_elem, {self.n_constants}), got {D.shape}")
+        u = np.ascontiguousarray(u, dtype=np.float64).reshape(D.shape[0], self.n_nodes, self.dim)
+        if not np.all(np.isfinite(u)):
+            bad = np.flatnonzero(~np.isfinite(u).reshape(len(u), -1).all(axis=1))
+            raise TensormassError(f"displacements contain NaN or Inf in element(s) {', '.join(map(str, bad[:10]))}")
+        return D, u
+
+    def _check(self, flags, what: str):
+        bad = np.flatnonzero(flags)
+        if bad.size:
+            raise InvertedElementError(f"{what}: det F <= 0 (inverted element) where law {self.law!r} is undefined", bad)
+
+    # -- kernels ----------------------------------------------------------------------------
+    def constants(self, X, E=None, nu=None, **native) -> np.ndarray:
+        """Per-element constants D from rest coordinates and E, nu (or native parameters, e.g. mu=, lam=)."""
+        X = self._coords(X)
+        params = self._params(len(X), E, nu, native)
+        D = np.empty((len(X), self.n_constants))
+        flags = np.zeros(len(X), dtype=np.int32)
+        self.module.constants(X, params, D, flags)
+        if np.any(flags == 1):
+            raise DegenerateElementError(f"{self.element}: det J <= 0 in the rest configuration (inverted or degenerate)",
+                                         np.flatnonzero(flags == 1))
+        if np.any(flags == 2):
+            raise DegenerateElementError(f"{self.element}: quadrature 'exact' needs straight-edged elements (curved edges found)",
+                                         np.flatnonzero(flags == 2))
+        return D
+
+    def energy(self, D, u) -> np.ndarray:
+        D, u = self._displacements(D, u)
+        out, flags = np.empty(len(D)), np.zeros(len(D), dtype=np.int32)
+        self.module.energy(D, u, out, flags)
+        self._check(flags, "energy")
+        return out
+
+    def forces(self, D, u) -> np.ndarray:
+        D, u = self._displacements(D, u)
+        f, flags = np.empty((len(D), self.n_dofs)), np.zeros(len(D), dtype=np.int32)
+        self.module.forces(D, u, f, flags)
+        self._check(flags, "forces")
+        return f
+
+    def stiffness(self, D, u) -> np.ndarray:
+        D, u = self._displacements(D, u)
+        K, flags = np.empty((len(D), self.n_dofs, self.n_dofs)), np.zeros(len(D), dtype=np.int32)
+        self.module.stiffness(D, u, K, flags)
+        self._check(flags, "stiffness")
+        return K
+
+    def forces_and_stiffness(self, D, u):
+        D, u = self._displacements(D, u)
+        f = np.empty((len(D), self.n_dofs))
+        K = np.empty((len(D), self.n_dofs, self.n_dofs))
+        flags = np.zeros(len(D), dtype=np.int32)
+        self.module.forces_and_stiffness(D, u, f, K, flags)
+        self._check(flags, "forces_and_stiffness")
+        return f, K
+
+    def inverted(self, D, u) -> np.ndarray:
+        """Boolean mask of elements whose det F <= 0 at some integration point (any law)."""
+        D, u = self._displacements(D, u)
+        return _min_det_F(D, u, self.n_points, 1 + self.n_dofs, self.n_nodes, self.dim) <= 0.0
+
+
+def _min_det_F(D, u, n_points, stride, n_nodes, dim):
+    """Smallest det F over the integration points of each element (numpy, vectorised)."""
+    n = len(D)
+    out = np.full(n, np.inf)
+    for q in range(n_points):
+        G = D[:, q * stride + 1:(q + 1) * stride].reshape(n, n_nodes, dim)
+        F = np.eye(dim) + np.einsum("eia,eib->eab", u, G)
+        out = np.minimum(out, np.linalg.det(F))
+    return out
+
+
+@lru_cache(maxsize=None)
+def load_kernel(element: str, law: str, quadrature: str, backend: str = "numba") -> Kernel:
+    """The kernel for (element, law, quadrature): committed, cached, or generated now."""
+    if backend not in BACKENDS:
+        raise TensormassError(f"unknown backend {backend!r}; known backends: {', '.join(BACKENDS)}")
+    from ..generator.catalogue import Entry, entries
+    entries([element], [law], [quadrature])      # validates the names with clear messages
+    name = Entry(element, law, quadrature).name
+    if backend == "numba":
+        return Kernel(_numba_module(name, Entry(element, law, quadrature)), "numba")
+    from .compile import c_module
+    return Kernel(c_module(Entry(element, law, quadrature)), "c")
+
+
+def _numba_module(name: str, entry):
+    try:
+        return importlib.import_module(f"tensormass.generated.numba.{name}")
+    except ModuleNotFoundError:
+        pass
+    path = cache_dir() / "numba" / f"{name}.py"
+    if not path.exists():
+        from ..generator.pipeline import generate_all
+        generate_all([entry], ["numba"], cache_dir(), progress=None)
+    if not path.exists():
+        raise KernelNotFoundError(f"could not generate kernel {name}")
+    module_name = f"tensormass_cache_{name}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -1,0 +1,952 @@
+"""Meshes for the runtime: a small container, reading, bar generators and validity checks.
+
+    mesh = read_mesh("part.msh")            # or generate_bar(element="tetra")
+    check_mesh(mesh)                        # raises MeshError naming the bad cells
+
+Node ordering is meshio's (= VTK's) everywhere.  A cell is correctly oriented
+when the Jacobian determinant of its map from the VTK reference coordinates is
+positive; note that for the VTK wedge this means the base triangle (0,1,2)
+winds so that its right-hand normal points AWAY from (3,4,5).
+
+Cell ids in error messages are global: blocks are numbered in order and the
+cells of block b follow those of blocks 0..b-1.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+from dataclasses import dataclass, field
+from itertools import permutations
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TensormassError
+
+__all__ = [
+    "MeshError", "Mesh", "CellBlock", "NODES_PER_CELL", "SOLID_TYPES_3D", "SOLID_TYPES_2D",
+    "read_mesh", "to_meshio", "generate_bar", "check_mesh", "orient_cells", "boundary_faces",
+]
+
+NODES_PER_CELL = {
+    "tetra": 4, "tetra10": 10, "hexahedron": 8, "wedge": 6, "pyramid": 5,
+    "triangle": 3, "triangle6": 6, "quad": 4,
+}
+SOLID_TYPES_3D = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid")
+SOLID_TYPES_2D = ("triangle", "triangle6", "quad")
+
+# Corner count: quadratic cells are checked topologically through their corners.
+_CORNERS = {"tetra": 4, "tetra10": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5,
+            "triangle": 3, "triangle6": 3, "quad": 4}
+_QUADRATIC = ("tetra10", "triangle6")
+
+# Cell data names that carry integer region tags, most specific first.
+_TAG_KEYS = ("gmsh:physical", "cell_tags", "medit:ref")
+
+# Relative tolerances.  _DET_TOL: det J below this times h^dim is "degenerate"
+# (h = cell bounding-box diagonal); _PLANE_TOL: how far (relative to the face
+# size) a point may sit off a face's plane and still count as lying on it.
+_DET_TOL = 1e-10
+_PLANE_TOL = 1e-4
+_INSIDE_TOL = 1e-8
+
+
+class MeshError(TensormassError):
+    """Bad mesh input; the message names the problem and the cell ids involved."""
+
+
+def _fmt_ids(ids, first: int = 8, noun: str = "cell") -> str:
+    """'[3, 7, ...] (12 cells)': the first few sorted ids and the count."""
+    ids = np.unique(np.asarray(ids, dtype=np.int64))
+    head = ", ".join(str(int(i)) for i in ids[:first])
+    more = ", ..." if ids.size > first else ""
+    return f"[{head}{more}] ({ids.size} {noun}{'' if ids.size == 1 else 's'})"
+
+
+# --------------------------------------------------------------------------- containers
+
+
+@dataclass
+class CellBlock:
+    """Cells of one type (and one tag, when the mesh carries tags)."""
+    type: str
+    cells: np.ndarray
+    tags: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.type not in NODES_PER_CELL:
+            raise MeshError(f"unsupported cell type {self.type!r} (supported: {', '.join(NODES_PER_CELL)})")
+        cells = np.asarray(self.cells)
+        k = NODES_PER_CELL[self.type]
+        if cells.size == 0:
+            cells = cells.reshape(0, k)
+        if cells.ndim != 2 or cells.shape[1] != k:
+            raise MeshError(f"{self.type} cells must have shape (n, {k}), got {cells.shape}")
+        if not np.issubdtype(cells.dtype, np.integer):
+            raise MeshError(f"{self.type} cell indices must be integers, got {cells.dtype}")
+        self.cells = np.ascontiguousarray(cells, dtype=np.int64)
+        if self.tags is not None:
+            tags = np.asarray(self.tags).reshape(-1)
+            if tags.shape[0] != self.cells.shape[0]:
+                raise MeshError(f"{self.type}: {tags.shape[0]} tags for {self.cells.shape[0]} cells")
+            self.tags = tags.astype(np.int64)
+
+    def __len__(self) -> int:
+        return self.cells.shape[0]
+
+
+@dataclass
+class Mesh:
+    """Points (n_points, dim) and cell blocks; dim is 2 or 3."""
+    points: np.ndarray
+    blocks: list[CellBlock] = field(default_factory=list)
+
+    def __post_init__(self):
+        pts = np.asarray(self.points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+            raise MeshError(f"points must have shape (n, 2) or (n, 3), got {pts.shape}")
+        self.points = np.ascontiguousarray(pts)
+        self.blocks = list(self.blocks)
+
+    @property
+    def dim(self) -> int:
+        return self.points.shape[1]
+
+    @property
+    def n_points(self) -> int:
+        return self.points.shape[0]
+
+    @property
+    def n_cells(self) -> int:
+        return sum(len(b) for b in self.blocks)
+
+    def cell_types(self) -> list[str]:
+        """Distinct cell types in block order."""
+        return list(dict.fromkeys(b.type for b in self.blocks))
+
+
+def _offsets(mesh: Mesh) -> np.ndarray:
+    """Global id of the first cell of each block."""
+    return np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
+
+
+# --------------------------------------------------------------------------- reading / writing
+
+
+def _topological_dim(cell_type: str) -> int | None:
+    """Dimension of any meshio cell type by its family name (None if unknown)."""
+    for prefixes, d in ((("tetra", "hexahedron", "wedge", "pyramid", "polyhedron"), 3),
+                        (("triangle", "quad", "polygon"), 2), (("line",), 1), (("vertex",), 0)):
+        if cell_type.startswith(prefixes):
+            return d
+    return None
+
+
+def _int_tags(values, name: str) -> np.ndarray:
+    tags = np.asarray(values).reshape(-1)
+    if tags.dtype.kind == "f":
+        if not np.all(np.isfinite(tags)) or np.any(tags != np.round(tags)):
+            raise MeshError(f"cell data {name!r} holds non-integer tags")
+    return tags.astype(np.int64)
+
+
+def _split_by_tag(cell_type, data, tags):
+    """Yield ((type, tag), cells) per distinct tag, tags in order of first appearance."""
+    if tags is None:
+        yield (cell_type, None), data
+        return
+    uniq, first = np.unique(tags, return_index=True)
+    for t in uniq[np.argsort(first)]:
+        yield (cell_type, int(t)), data[tags == t]
+
+
+def read_mesh(path) -> Mesh:
+    """Read a mesh with meshio and keep the solid cells of its dimension.
+
+    Lower-dimensional cells (boundary triangles/lines/vertices) are dropped.
+    Tags come from cell data 'gmsh:physical', 'cell_tags' or 'medit:ref'; the
+    blocks are one per (type, tag), in order of first appearance, with the
+    file's cell order kept within each block.  A 2D mesh stored with z == 0 is
+    returned with 2 coordinates.
+    """
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"mesh file not found: {path}")
+    # meshio prints its reasons and may even call sys.exit(); capture both
+    said = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            m = meshio.read(path)
+    except (Exception, SystemExit) as exc:
+        detail = " ".join(said.getvalue().split())
+        reason = f"{type(exc).__name__}: {exc}" if not isinstance(exc, SystemExit) else ""
+        raise MeshError(f"could not read mesh {path}: " + " ".join(x for x in (reason, detail) if x)) from None
+
+    dims = {cb.type: _topological_dim(cb.type) for cb in m.cells}
+    unknown = sorted(t for t, d in dims.items() if d is None)
+    if unknown:
+        raise MeshError(f"{path}: unknown cell type(s) {', '.join(unknown)}")
+    dim = max(dims.values(), default=-1)
+    if dim < 2:
+        raise MeshError(f"{path}: no 2D or 3D cells (found: {', '.join(sorted(dims)) or 'none'})")
+    solid = SOLID_TYPES_3D if dim == 3 else SOLID_TYPES_2D
+    bad = sorted(t for t, d in dims.items() if d == dim and t not in solid)
+    if bad:
+        raise MeshError(f"{path}: unsupported {dim}D cell type(s) {', '.join(bad)} "
+                        f"(supported: {', '.join(solid)})")
+
+    points = _points_for_dim(np.asarray(m.points, dtype=np.float64), dim, path)
+    tag_key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
+    groups: dict = {}
+    for i, cb in enumerate(m.cells):
+        if dims[cb.type] != dim:
+            continue
+        data = np.asarray(cb.data, dtype=np.int64)
+        tags = None if tag_key is None else _int_tags(m.cell_data[tag_key][i], tag_key)
+        for key, cells in _split_by_tag(cb.type, data, tags):
+            groups.setdefault(key, []).append(cells)
+    blocks = []
+    for (ctype, tag), parts in groups.items():
+        cells = np.concatenate(parts)
+        tags = None if tag is None else np.full(len(cells), tag, dtype=np.int64)
+        blocks.append(CellBlock(ctype, cells, tags))
+    return Mesh(points, blocks)
+
+
+def _points_for_dim(points, dim, path):
+    """3D meshes need 3 coordinates; 2D meshes stored with z == 0 lose z."""
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise MeshError(f"{path}: points have shape {points.shape}")
+    if dim == 3:
+        if points.shape[1] != 3:
+            raise MeshError(f"{path}: 3D cells but {points.shape[1]}D points")
+        return points
+    if points.shape[1] == 3:
+        extent = float(np.ptp(points[:, :2], axis=0).max()) if len(points) else 0.0
+        if np.any(np.abs(points[:, 2]) > 1e-12 * max(extent, 1.0)):
+            raise MeshError(f"{path}: 2D cells with nonzero z (surface meshes in 3D are not supported)")
+        return points[:, :2].copy()
+    return points
+
+
+def to_meshio(mesh: Mesh, pad_to_3d: bool = False, tag_name: str = "cell_tags"):
+    """A meshio.Mesh of the same points and blocks; tags (0 where a block has none) under tag_name.
+
+    pad_to_3d appends z = 0 to 2D points (VTU wants 3 coordinates).
+    """
+    import meshio
+
+    points = mesh.points
+    if pad_to_3d and mesh.dim == 2:
+        points = np.column_stack([points, np.zeros(mesh.n_points)])
+    cells = [(b.type, b.cells) for b in mesh.blocks]
+    cell_data = {}
+    if any(b.tags is not None for b in mesh.blocks):
+        cell_data[tag_name] = [b.tags if b.tags is not None else np.zeros(len(b), np.int64)
+                               for b in mesh.blocks]
+    return meshio.Mesh(points, cells, cell_data=cell_data)
+
+
+# --------------------------------------------------------------------------- reference maps
+#
+# For each type a table G (q, k, r) of shape-function gradients at q sample
+# points (corners, then the centroid): J[cell, q] = X[cell]^T G[q] and det J > 0
+# means correctly oriented.
+
+_REF_CORNERS = {
+    "tetra": [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)],
+    "hexahedron": [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1),
+                   (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)],
+    "wedge": [(0, 0, -1), (0, 1, -1), (1, 0, -1), (0, 0, 1), (0, 1, 1), (1, 0, 1)],
+    "triangle": [(0, 0), (1, 0), (0, 1)],
+    "quad": [(-1, -1), (1, -1), (1, 1), (-1, 1)],
+}
+_REF_CORNERS["tetra10"] = _REF_CORNERS["tetra"]
+_REF_CORNERS["triangle6"] = _REF_CORNERS["triangle"]
+_SIMPLEX_EDGES = {"tetra10": [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)],
+                  "triangle6": [(0, 1), (1, 2), (2, 0)]}
+
+
+def _grad_simplex(xi, quadratic_edges=None):
+    """Gradients (k, r) of linear or (VTK-ordered) quadratic simplex shape functions."""
+    r = len(xi)
+    lam = np.concatenate([[1.0 - sum(xi)], xi])
+    dlam = np.vstack([-np.ones(r), np.eye(r)])
+    if quadratic_edges is None:
+        return dlam
+    corners = [(4 * lam[i] - 1) * dlam[i] for i in range(r + 1)]
+    mids = [4 * (lam[a] * dlam[b] + lam[b] * dlam[a]) for a, b in quadratic_edges]
+    return np.array(corners + mids)
+
+
+def _grad_tensor(xi, corners):
+    """Gradients of (bi/tri)linear shape functions on [-1, 1]^r."""
+    c = np.asarray(corners, float)
+    f = 1 + c * np.asarray(xi)  # (k, r) one-dimensional factors
+    g = np.empty_like(c)
+    for d in range(c.shape[1]):
+        g[:, d] = c[:, d] * np.prod(np.delete(f, d, axis=1), axis=1)
+    return g / 2 ** c.shape[1]
+
+
+def _grad_wedge(xi):
+    x, y, z = xi
+    tri = np.array([1 - x - y, y, x])           # node (0,0), (0,1), (1,0)
+    dtri = np.array([[-1, -1], [0, 1], [1, 0]], float)
+    g = np.zeros((6, 3))
+    for a in range(6):
+        s = -1 if a < 3 else 1
+        g[a, :2] = dtri[a % 3] * (1 + s * z) / 2
+        g[a, 2] = tri[a % 3] * s / 2
+    return g
+
+
+def _pyramid_table():
+    """Pyramid det J samples (the rational map's Jacobian reduces to linear forms).
+
+    With x = (1-z) B(x/(1-z), y/(1-z)) + z x_apex (B the bilinear base), det J at
+    base corner a, and its limit at the apex along the edge to a, both equal
+    det[B_u(a), B_v(a), x_apex - x_a]; at the centroid (0,0,1/4) it is
+    det[B_u(0), B_v(0), x_apex - B(0)].
+    """
+    base = np.array(_REF_CORNERS["quad"], float)
+    rows = []
+    for a, uv in enumerate(list(base) + [np.zeros(2)]):
+        g = np.zeros((5, 3))
+        g[:4, :2] = _grad_tensor(uv, base)
+        g[4, 2] = 1.0
+        if a < 4:
+            g[a, 2] -= 1.0
+        else:
+            g[:4, 2] -= 0.25
+        rows.append(g)
+    return np.array(rows)
+
+
+def _gradient_table(cell_type: str) -> np.ndarray:
+    if cell_type == "pyramid":
+        return _pyramid_table()
+    corners = np.array(_REF_CORNERS[cell_type], float)
+    samples = list(corners) + [corners.mean(axis=0)]
+    if cell_type in ("tetra", "triangle", "tetra10", "triangle6"):
+        edges = _SIMPLEX_EDGES.get(cell_type)
+        return np.array([_grad_simplex(x, edges) for x in samples])
+    if cell_type == "wedge":
+        return np.array([_grad_wedge(x) for x in samples])
+    return np.array([_grad_tensor(x, corners) for x in samples])
+
+
+_GRAD = {t: _gradient_table(t) for t in NODES_PER_CELL}
+
+
+def _det(J: np.ndarray) -> np.ndarray:
+    """Determinants of (..., d, d) with d = 2 or 3, written out (much faster than linalg)."""
+    if J.shape[-1] == 2:
+        return J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    return (J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
+            - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
+            + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0]))
+
+
+def _sample_dets(points: np.ndarray, block: CellBlock) -> np.ndarray:
+    """det J at the corners and the centroid of every cell: (n, q)."""
+    X = points[block.cells]                                  # (n, k, d)
+    J = np.einsum("nkd,qkr->nqdr", X, _GRAD[block.type], optimize=True)
+    return _det(J)
+
+
+def _cell_size(points: np.ndarray, block: CellBlock) -> np.ndarray:
+    X = points[block.cells[:, :_CORNERS[block.type]]]
+    return np.linalg.norm(X.max(axis=1) - X.min(axis=1), axis=1)
+
+
+# --------------------------------------------------------------------------- faces
+#
+# Faces (edges in 2D) in outward order for a positively oriented cell, corners
+# only; quadratic midside nodes are looked up separately.
+
+_FACES = {
+    "tetra": [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)],
+    "hexahedron": [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)],
+    "wedge": [(0, 1, 2), (3, 5, 4), (0, 3, 4, 1), (0, 2, 5, 3), (1, 4, 5, 2)],
+    "pyramid": [(0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
+    "triangle": [(0, 1), (1, 2), (2, 0)],
+    "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+}
+_FACES["tetra10"] = _FACES["tetra"]
+_FACES["triangle6"] = _FACES["triangle"]
+
+
+def _midside(cell_type: str, a: int, b: int) -> int:
+    """Local index of the midside node of corner edge (a, b) of a quadratic simplex."""
+    for m, e in enumerate(_SIMPLEX_EDGES[cell_type]):
+        if set(e) == {a, b}:
+            return _CORNERS[cell_type] + m
+    raise KeyError((cell_type, a, b))
+
+
+def _face_with_midsides(cell_type: str, face) -> tuple:
+    """Local face nodes incl. midsides (triangle6 / line3 order) for quadratic cells."""
+    if cell_type not in _QUADRATIC:
+        return tuple(face)
+    if len(face) == 2:
+        return tuple(face) + (_midside(cell_type, *face),)
+    n = len(face)
+    return tuple(face) + tuple(_midside(cell_type, face[i], face[(i + 1) % n]) for i in range(n))
+
+
+@dataclass
+class _FaceTable:
+    """All cell faces as rows: nodes (m, w) padded with -1, and who owns them."""
+    nodes: np.ndarray
+    nvert: np.ndarray
+    cell: np.ndarray       # global cell id
+    block: np.ndarray
+    local: np.ndarray      # cell index within its block
+    lface: np.ndarray      # face index within the cell
+    quadratic: np.ndarray  # owner is a quadratic cell
+    group: np.ndarray      # id of the geometric face (same sorted corner set)
+    count: np.ndarray      # per group: how many cells use it
+    order: np.ndarray      # rows sorted by group
+
+
+def _group_rows(keys: np.ndarray):
+    """Group equal rows: (order, group id per row, count per group)."""
+    order = np.lexsort(keys.T[::-1])
+    sk = keys[order]
+    new = np.empty(len(keys), dtype=bool)
+    new[:1] = True
+    new[1:] = np.any(sk[1:] != sk[:-1], axis=1)
+    gid = np.empty(len(keys), dtype=np.int64)
+    gid[order] = np.cumsum(new) - 1
+    return order, gid, np.bincount(gid)
+
+
+def _face_table(mesh: Mesh) -> _FaceTable:
+    width = 4 if mesh.dim == 3 else 2
+    off = _offsets(mesh)
+    parts = []
+    for bi, blk in enumerate(mesh.blocks):
+        n = len(blk)
+        for fi, face in enumerate(_FACES[blk.type]):
+            rows = np.full((n, width), -1, dtype=np.int64)
+            rows[:, :len(face)] = blk.cells[:, face]
+            parts.append((rows, np.full(n, len(face)), off[bi] + np.arange(n), np.full(n, bi),
+                          np.arange(n), np.full(n, fi), np.full(n, blk.type in _QUADRATIC)))
+    cols = [np.concatenate(c) for c in zip(*parts)]
+    nodes = cols[0]
+    order, gid, count = _group_rows(np.sort(nodes, axis=1))
+    return _FaceTable(nodes, cols[1], cols[2], cols[3], cols[4], cols[5], cols[6].astype(bool),
+                      gid, count, order)
+
+
+def _boundary_rows(ft: _FaceTable) -> np.ndarray:
+    return np.flatnonzero(ft.count[ft.group] == 1)
+
+
+def boundary_faces(mesh: Mesh) -> list:
+    """Faces (edges in 2D) used by exactly one cell: (block index, cell index, nodes).
+
+    Nodes are in outward order (right-hand normal, or edge direction with the
+    cell on the left, points out of a positively oriented cell); quadratic
+    cells give their midside nodes too (triangle6 / line3 order).
+    """
+    if mesh.n_cells == 0:
+        return []
+    ft = _face_table(mesh)
+    out = []
+    for r in _boundary_rows(ft):
+        blk = mesh.blocks[ft.block[r]]
+        local = _face_with_midsides(blk.type, _FACES[blk.type][ft.lface[r]])
+        out.append((int(ft.block[r]), int(ft.local[r]), tuple(int(v) for v in blk.cells[ft.local[r], list(local)])))
+    return out
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def check_mesh(mesh: Mesh) -> None:
+    """Raise MeshError unless the mesh is a valid, conforming, positively oriented FE mesh.
+
+    Checks, in order: cell types fit the dimension and there is at least one
+    cell; finite coordinates; indices in range; no repeated node in a cell;
+    det J > 0 (relative to cell size) at every corner and the centroid; every
+    face shared by at most two cells, from opposite sides, with equal node
+    order and midside nodes; no non-conforming interface (a face covered by
+    other faces with different nodes: hanging nodes, a quad against two
+    triangles, mismatched diagonals, unmerged duplicate nodes).  Unused points
+    are allowed.
+    """
+    _check_structure(mesh)
+    _check_jacobians(mesh)
+    ft = _face_table(mesh)
+    _check_shared_faces(mesh, ft)
+    _check_midsides(mesh)
+    _check_quad_against_triangles(ft)
+    _check_overlapping_faces(mesh, ft)
+
+
+def _check_structure(mesh: Mesh) -> None:
+    if mesh.n_cells == 0:
+        raise MeshError("mesh has no cells")
+    allowed = SOLID_TYPES_3D if mesh.dim == 3 else SOLID_TYPES_2D
+    wrong = sorted({b.type for b in mesh.blocks if b.type not in allowed})
+    if wrong:
+        raise MeshError(f"cell type(s) {', '.join(wrong)} do not fit a {mesh.dim}D mesh")
+    bad_pts = np.flatnonzero(~np.all(np.isfinite(mesh.points), axis=1))
+    if bad_pts.size:
+        raise MeshError(f"non-finite (NaN/Inf) coordinates at points {_fmt_ids(bad_pts, noun='point')}")
+    off = _offsets(mesh)
+    out_of_range, repeated = [], []
+    for bi, blk in enumerate(mesh.blocks):
+        c = blk.cells
+        out_of_range.append(off[bi] + np.flatnonzero(np.any((c < 0) | (c >= mesh.n_points), axis=1)))
+        s = np.sort(c, axis=1)
+        repeated.append(off[bi] + np.flatnonzero(np.any(s[:, 1:] == s[:, :-1], axis=1)))
+    out_of_range, repeated = np.concatenate(out_of_range), np.concatenate(repeated)
+    if out_of_range.size:
+        raise MeshError(f"node index out of range 0..{mesh.n_points - 1} in cells {_fmt_ids(out_of_range)}")
+    if repeated.size:
+        raise MeshError(f"repeated node within a cell in cells {_fmt_ids(repeated)}")
+
+
+def _check_jacobians(mesh: Mesh) -> None:
+    off = _offsets(mesh)
+    inverted, degenerate = [], []
+    for bi, blk in enumerate(mesh.blocks):
+        dets = _sample_dets(mesh.points, blk)
+        tol = _DET_TOL * _cell_size(mesh.points, blk) ** mesh.dim
+        lo = dets.min(axis=1)
+        inverted.append(off[bi] + np.flatnonzero(lo < -tol))
+        degenerate.append(off[bi] + np.flatnonzero((lo >= -tol) & (lo <= tol)))
+    inverted, degenerate = np.concatenate(inverted), np.concatenate(degenerate)
+    msgs = []
+    if inverted.size:
+        msgs.append(f"inverted cells (det J < 0 at a corner or the centroid) {_fmt_ids(inverted)}")
+    if degenerate.size:
+        msgs.append(f"degenerate cells (det J ~ 0, collapsed or flat) {_fmt_ids(degenerate)}")
+    if msgs:
+        raise MeshError("; ".join(msgs))
+
+
+def _face_orientation(ft: _FaceTable, rows: np.ndarray):
+    """Cyclic orientation of faces: (sign, node opposite the minimum or -1).
+
+    Rotating each face so that its smallest node comes first, the face runs one
+    way if the next node is smaller than the previous one.  Two cells on opposite
+    sides of a face traverse it in opposite directions.
+    """
+    F, nv = ft.nodes[rows], ft.nvert[rows]
+    sign = np.empty(len(rows), dtype=bool)
+    opp = np.full(len(rows), -1, dtype=np.int64)
+    for v in np.unique(nv):
+        sel = np.flatnonzero(nv == v)
+        R = F[sel, :v]
+        if v == 2:  # an edge: its direction
+            sign[sel] = R[:, 0] < R[:, 1]
+            continue
+        m = np.argmin(R, axis=1)
+        ar = np.arange(len(sel))
+        sign[sel] = R[ar, (m + 1) % v] < R[ar, (m - 1) % v]
+        if v == 4:
+            opp[sel] = R[ar, (m + 2) % v]
+    return sign, opp
+
+
+def _check_shared_faces(mesh: Mesh, ft: _FaceTable) -> None:
+    kind = "edge" if mesh.dim == 2 else "face"
+    over = np.flatnonzero(ft.count[ft.group] > 2)
+    if over.size:
+        raise MeshError(f"{kind}s shared by more than two cells (overlapping cells) in cells {_fmt_ids(ft.cell[over])}")
+    # rows of shared faces come in adjacent pairs in the sorted order
+    srt = ft.order
+    starts = np.flatnonzero(ft.count[ft.group[srt]] == 2)
+    starts = starts[ft.group[srt[starts]] != np.concatenate([[-1], ft.group[srt]])[starts]]
+    a, b = srt[starts], srt[starts + 1]
+    sign, opp = _face_orientation(ft, np.concatenate([a, b]))
+    n = len(a)
+    same_side = sign[:n] == sign[n:]
+    twisted = opp[:n] != opp[n:]
+    mixed = ft.quadratic[a] != ft.quadratic[b]
+    for mask, what in ((same_side, f"cells on the same side of a shared {kind} (overlapping or inconsistently oriented)"),
+                       (twisted, "shared quad faces with different node order (twisted)"),
+                       (mixed, f"linear and quadratic cells sharing a {kind} (hanging midside nodes)")):
+        if np.any(mask):
+            raise MeshError(f"{what}: {_fmt_pairs(ft.cell[a[mask]], ft.cell[b[mask]])}")
+
+
+def _fmt_pairs(ca, cb, first: int = 5) -> str:
+    pairs = sorted({(int(min(x, y)), int(max(x, y))) for x, y in zip(ca, cb)})
+    head = ", ".join(f"{x} and {y}" for x, y in pairs[:first])
+    more = ", ..." if len(pairs) > first else ""
+    return f"cells {head}{more} ({len(pairs)} pair{'' if len(pairs) == 1 else 's'})"
+
+
+def _check_midsides(mesh: Mesh) -> None:
+    """Cells sharing a corner edge must share its midside node."""
+    keys, mids, cells = [], [], []
+    off = _offsets(mesh)
+    for bi, blk in enumerate(mesh.blocks):
+        if blk.type not in _QUADRATIC:
+            continue
+        nc = _CORNERS[blk.type]
+        for m, (p, q) in enumerate(_SIMPLEX_EDGES[blk.type]):
+            keys.append(np.sort(blk.cells[:, [p, q]], axis=1))
+            mids.append(blk.cells[:, nc + m])
+            cells.append(off[bi] + np.arange(len(blk)))
+    if not keys:
+        return
+    keys, mids, cells = np.concatenate(keys), np.concatenate(mids), np.concatenate(cells)
+    order = np.lexsort((mids, keys[:, 1], keys[:, 0]))
+    k, m, c = keys[order], mids[order], cells[order]
+    bad = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1) & (m[1:] != m[:-1]))
+    if bad.size:
+        raise MeshError(f"cells sharing an edge but not its midside node: {_fmt_pairs(c[bad], c[bad + 1])}")
+
+
+def _check_quad_against_triangles(ft: _FaceTable) -> None:
+    """A boundary triangle whose three nodes all belong to one boundary quad splits that quad."""
+    rows = _boundary_rows(ft)
+    quads, tris = rows[ft.nvert[rows] == 4], rows[ft.nvert[rows] == 3]
+    if quads.size == 0 or tris.size == 0:
+        return
+    Q = ft.nodes[quads]
+    triples = np.concatenate([np.sort(Q[:, [i for i in range(4) if i != skip]], axis=1) for skip in range(4)])
+    owner = np.tile(quads, 4)
+    T = np.sort(ft.nodes[tris, :3], axis=1)
+    keys = np.concatenate([triples, T])
+    src = np.concatenate([owner, tris])
+    is_tri = np.concatenate([np.zeros(len(triples), bool), np.ones(len(T), bool)])
+    order, gid, count = _group_rows(keys)
+    # a group holding both a quad triple and a triangle is a conflict
+    has_tri = np.bincount(gid, weights=is_tri, minlength=len(count)) > 0
+    has_quad = np.bincount(gid, weights=~is_tri, minlength=len(count)) > 0
+    hit = np.flatnonzero(has_tri & has_quad)
+    if hit.size == 0:
+        return
+    mask = np.isin(gid, hit)
+    qa = {g: src[i] for i, g in zip(np.flatnonzero(mask & ~is_tri), gid[mask & ~is_tri])}
+    tr = [(ft.cell[qa[g]], ft.cell[src[i]]) for i, g in zip(np.flatnonzero(mask & is_tri), gid[mask & is_tri])]
+    raise MeshError("non-conforming: quad face split into triangles by the neighbour, "
+                    + _fmt_pairs(*zip(*tr)))
+
+
+def _check_overlapping_faces(mesh: Mesh, ft: _FaceTable) -> None:
+    """Boundary faces that lie on top of other boundary faces mean a non-conforming interface.
+
+    In a conforming mesh the boundary faces only meet along edges.  A hanging
+    node, a quad against two triangles, mismatched diagonals or unmerged
+    duplicate nodes all leave boundary faces on both sides of the interface
+    that cover the same area.  Each face gets a test point at a generic interior
+    position (so it does not fall on the other side's edges); it must not lie
+    inside another boundary face (within _PLANE_TOL of its plane).
+    """
+    rows = _boundary_rows(ft)
+    if rows.size < 2:
+        return
+    geo = _face_geometry_3d if mesh.dim == 3 else _face_geometry_2d
+    centre, radius, normal, test = geo(mesh.points, ft.nodes[rows], ft.nvert[rows])
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(test)
+    near = tree.query_ball_point(centre, radius * (1 + 1e-9) + 1e-300, workers=-1)
+    lens = np.fromiter((len(x) for x in near), dtype=np.int64, count=len(near))
+    j = np.repeat(np.arange(len(rows)), lens)              # face that might contain ...
+    i = np.fromiter((v for x in near for v in x), dtype=np.int64, count=int(lens.sum()))  # ... this test point
+    keep = ft.cell[rows[i]] != ft.cell[rows[j]]
+    keep &= np.abs(np.einsum("nd,nd->n", normal[i], normal[j])) > 0.5
+    i, j = i[keep], j[keep]
+    off_plane = np.abs(np.einsum("nd,nd->n", test[i] - centre[j], normal[j]))
+    keep = off_plane <= _PLANE_TOL * radius[j]
+    i, j = i[keep], j[keep]
+    inside = _inside_3d if mesh.dim == 3 else _inside_2d
+    hit = inside(mesh.points, ft.nodes[rows[j]], ft.nvert[rows[j]], test[i], normal[j])
+    if np.any(hit):
+        raise MeshError("non-conforming interface (hanging node, split or mismatched faces, "
+                        "or unmerged duplicate nodes): faces of "
+                        + _fmt_pairs(ft.cell[rows[i[hit]]], ft.cell[rows[j[hit]]]))
+
+
+# generic (irrational-looking) interior positions for test points
+_TRI_W = np.array([0.5127, 0.3089, 0.1784])
+_QUAD_UV = (0.2371, -0.1638)
+_EDGE_T = 0.3719
+
+
+def _pad_triangles(F, nv):
+    """Repeat the last vertex of triangles so all faces have 4 columns."""
+    F = F.copy()
+    tri = nv == 3
+    F[tri, 3] = F[tri, 2]
+    return F
+
+
+def _face_geometry_3d(points, F, nv):
+    V = points[_pad_triangles(F, nv)]                           # (m, 4, 3)
+    tri = (nv == 3)[:, None]
+    centre = np.where(tri, V[:, :3].mean(axis=1), V.mean(axis=1))
+    normal = np.where(tri, np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]),
+                      np.cross(V[:, 2] - V[:, 0], V[:, 3] - V[:, 1]))
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    radius = np.linalg.norm(V - centre[:, None], axis=2).max(axis=1)
+    u, v = _QUAD_UV
+    qw = np.array([(1 - u) * (1 - v), (1 + u) * (1 - v), (1 + u) * (1 + v), (1 - u) * (1 + v)]) / 4
+    test = np.where(tri, np.einsum("w,nwd->nd", _TRI_W, V[:, :3]), np.einsum("w,nwd->nd", qw, V))
+    return centre, radius, normal, test
+
+
+def _face_geometry_2d(points, F, nv):
+    A, B = points[F[:, 0]], points[F[:, 1]]
+    d = B - A
+    length = np.linalg.norm(d, axis=1)
+    normal = np.column_stack([d[:, 1], -d[:, 0]]) / np.maximum(length, 1e-300)[:, None]
+    return (A + B) / 2, length / 2, normal, A + _EDGE_T * d
+
+
+def _bary2(P, A, B, C):
+    """Barycentric coordinates (of A, B, C) of 2D points P."""
+    def cross(u, v):
+        return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    det = cross(B - A, C - A)
+    det = np.where(det == 0, 1e-300, det)
+    lb = cross(P - A, C - A) / det
+    lc = cross(B - A, P - A) / det
+    return 1 - lb - lc, lb, lc
+
+
+def _inside_3d(points, F, nv, P, normal):
+    """Is P strictly inside face F (projected onto the face plane)?"""
+    V = points[_pad_triangles(F, nv)]
+    t1 = V[:, 1] - V[:, 0]
+    t1 /= np.maximum(np.linalg.norm(t1, axis=1), 1e-300)[:, None]
+    t2 = np.cross(normal, t1)
+
+    def proj(X):
+        return np.column_stack([np.einsum("nd,nd->n", X, t1), np.einsum("nd,nd->n", X, t2)])
+
+    p, v = proj(P), [proj(V[:, k]) for k in range(4)]
+    e = _INSIDE_TOL
+    # split the face along v0-v2; the diagonal itself counts as inside a quad
+    l0, l1, l2 = _bary2(p, v[0], v[1], v[2])
+    quad = nv == 4
+    in_a = (l0 > e) & (l2 > e) & np.where(quad, l1 >= -e, l1 > e)
+    m0, m2, m3 = _bary2(p, v[0], v[2], v[3])
+    in_b = quad & (m0 > e) & (m3 > e) & (m2 >= -e)
+    return in_a | in_b
+
+
+def _inside_2d(points, F, nv, P, normal):
+    A, B = points[F[:, 0]], points[F[:, 1]]
+    d = B - A
+    s = np.einsum("nd,nd->n", P - A, d) / np.maximum(np.einsum("nd,nd->n", d, d), 1e-300)
+    return (s > _INSIDE_TOL) & (s < 1 - _INSIDE_TOL)
+
+
+# --------------------------------------------------------------------------- orientation fix
+
+# Node permutations that mirror each reference element onto itself
+# (swap xi<->eta for simplices, pyramid and quad; zeta -> -zeta for hex, wedge).
+_MIRROR = {
+    "tetra": [0, 2, 1, 3], "tetra10": [0, 2, 1, 3, 6, 5, 4, 7, 9, 8],
+    "hexahedron": [4, 5, 6, 7, 0, 1, 2, 3], "wedge": [3, 4, 5, 0, 1, 2], "pyramid": [0, 3, 2, 1, 4],
+    "triangle": [0, 2, 1], "triangle6": [0, 2, 1, 5, 4, 3], "quad": [0, 3, 2, 1],
+}
+
+
+def orient_cells(mesh: Mesh) -> Mesh:
+    """A copy with mirrored cells renumbered so that det J > 0.
+
+    Only for users who ask for it (meshes from tools with another orientation
+    convention): a cell whose det J is negative at every corner and the centroid
+    is a mirror image and gets the mirror permutation of its nodes (e.g. two
+    nodes of a simplex swapped).  Tangled cells (mixed signs) are left alone;
+    check_mesh still reports them.
+    """
+    blocks = []
+    for blk in mesh.blocks:
+        cells = blk.cells.copy()
+        flip = np.all(_sample_dets(mesh.points, blk) < 0, axis=1)
+        cells[flip] = cells[flip][:, _MIRROR[blk.type]]
+        blocks.append(CellBlock(blk.type, cells, None if blk.tags is None else blk.tags.copy()))
+    return Mesh(mesh.points.copy(), blocks)
+
+
+# --------------------------------------------------------------------------- bar generators
+#
+# All 3D bars start from a structured grid of hexes (VTK node order, axes
+# aligned so det J > 0) and split each hex in a way that matches its neighbours.
+
+_HEX_OFFSETS = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+_QUAD_OFFSETS = [(0, 0), (1, 0), (1, 1), (0, 1)]
+
+
+def _kuhn_table() -> np.ndarray:
+    """The 6 Kuhn tets of a hex: monotone paths from corner (0,0,0) to (1,1,1).
+
+    Every hex is cut the same way, so each face diagonal runs from the face's
+    lowest to its highest corner on both sides: the split is conforming.  Odd
+    axis permutations give negative tets, fixed by swapping two nodes.
+    """
+    local = {o: i for i, o in enumerate(_HEX_OFFSETS)}
+    tets = []
+    for perm in permutations(range(3)):
+        v = np.zeros(3, int)
+        path = [local[tuple(v)]]
+        for ax in perm:
+            v[ax] = 1
+            path.append(local[tuple(v)])
+        if np.linalg.det(np.eye(3)[list(perm)]) < 0:
+            path[1], path[2] = path[2], path[1]
+        tets.append(path)
+    return np.array(tets)
+
+
+_KUHN = _kuhn_table()
+# Two wedges per hex, extruded along z, bottom quad cut along its diagonal 0-2.
+# The base triangles wind clockwise seen from +z (VTK wedge convention).  The
+# x = const and y = const faces stay whole quads; z faces get the same diagonal
+# in every layer.
+_WEDGE_SPLIT = np.array([[0, 2, 1, 4, 6, 5], [0, 3, 2, 4, 7, 6]])
+# Six pyramids per hex, one per face, apex at a new centre node; each base
+# winds so its right-hand normal points into the hex (towards the apex).
+_PYRAMID_BASES = np.array([(0, 1, 2, 3), (4, 7, 6, 5), (0, 4, 5, 1), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 4, 0)])
+_XPLUS_FACE = 3
+# The x+ pyramid of a transition hex cut into two tets along diagonal 1-6, the
+# diagonal a Kuhn-split neighbour has on its x- face (corners (0,0,0)-(0,1,1)).
+_XPLUS_TETS = np.array([(1, 5, 6), (1, 6, 2)])
+
+
+def _hex_grid(size, cells, origin):
+    """Points and hexes (nx, ny, nz, 8) of a structured box."""
+    axes = [o + np.linspace(0.0, s, n + 1) for o, s, n in zip(origin, size, cells)]
+    grid = np.meshgrid(*axes, indexing="ij")
+    points = np.column_stack([g.ravel() for g in grid])
+    idx = np.arange(len(points)).reshape([n + 1 for n in cells])
+    offsets = _HEX_OFFSETS if len(cells) == 3 else _QUAD_OFFSETS
+    sl = [tuple(slice(d, d + n) for d, n in zip(off, cells)) for off in offsets]
+    return points, np.stack([idx[s] for s in sl], axis=-1)
+
+
+def _add_centres(points, hexes):
+    """Append one node at the centre of each hex; returns points and the new ids."""
+    centres = points[hexes].mean(axis=1)
+    ids = len(points) + np.arange(len(hexes))
+    return np.vstack([points, centres]), ids
+
+
+def _pyramids(hexes, centres, skip_face=None):
+    faces = [f for f in range(6) if f != skip_face]
+    base = hexes[:, _PYRAMID_BASES[faces]]                           # (m, f, 4)
+    apex = np.broadcast_to(centres[:, None, None], base.shape[:2] + (1,))
+    return np.concatenate([base, apex], axis=2).reshape(-1, 5)
+
+
+def _transition_tets(hexes, centres):
+    tri = hexes[:, _XPLUS_TETS]                                      # (m, 2, 3)
+    apex = np.broadcast_to(centres[:, None, None], tri.shape[:2] + (1,))
+    return np.concatenate([tri, apex], axis=2).reshape(-1, 4)
+
+
+def _add_midsides(points, cells, edges):
+    """Quadratic cells: one shared node at the middle of every corner edge."""
+    e = np.sort(cells[:, np.array(edges)], axis=2).reshape(-1, 2)
+    uniq, inv = np.unique(e, axis=0, return_inverse=True)
+    mids = points[uniq].mean(axis=1)
+    ids = len(points) + inv.reshape(len(cells), len(edges))
+    return np.vstack([points, mids]), np.hstack([cells, ids])
+
+
+def _mixed_bar_3d(points, hexes):
+    """Conforming bar with all four solid types, in 4 sections along x:
+
+        hexahedra | wedges | pyramids (last column: transition) | tetrahedra (Kuhn)
+
+    hex|wedge: wedges are extruded along z, so their x faces are whole quads.
+    wedge|pyramid: every hex face is a pyramid base (a quad).  pyramid|tet: the
+    Kuhn tets cut their x- face along (0,0,0)-(0,1,1), so in the last pyramid
+    column the x+ pyramid is cut into two tets along that same diagonal; its
+    triangular sides are kept whole, so it still matches the other pyramids.
+    """
+    nx = hexes.shape[0]
+    if nx < 4:
+        raise MeshError("element='mixed' needs at least 4 cells along x")
+    s = np.array_split(np.arange(nx), 4)
+    flat = lambda cols: hexes[cols].reshape(-1, 8)  # noqa: E731
+    pyr_full, transition = flat(s[2][:-1]), flat(s[2][-1:])
+    points, c_full = _add_centres(points, pyr_full)
+    points, c_tr = _add_centres(points, transition)
+    pyramids = np.vstack([_pyramids(pyr_full, c_full), _pyramids(transition, c_tr, skip_face=_XPLUS_FACE)])
+    tets = np.vstack([_transition_tets(transition, c_tr), flat(s[3])[:, _KUHN].reshape(-1, 4)])
+    blocks = [CellBlock("hexahedron", flat(s[0])),
+              CellBlock("wedge", flat(s[1])[:, _WEDGE_SPLIT].reshape(-1, 6)),
+              CellBlock("pyramid", pyramids), CellBlock("tetra", tets)]
+    return Mesh(points, blocks)
+
+
+def _bar_3d(size, cells, origin, element):
+    points, grid = _hex_grid(size, cells, origin)
+    if element == "mixed":
+        return _mixed_bar_3d(points, grid)
+    hexes = grid.reshape(-1, 8)
+    if element == "hexahedron":
+        return Mesh(points, [CellBlock("hexahedron", hexes)])
+    if element in ("tetra", "tetra10"):
+        tets = hexes[:, _KUHN].reshape(-1, 4)
+        if element == "tetra10":
+            points, tets = _add_midsides(points, tets, _SIMPLEX_EDGES["tetra10"])
+        return Mesh(points, [CellBlock(element, tets)])
+    if element == "wedge":
+        return Mesh(points, [CellBlock("wedge", hexes[:, _WEDGE_SPLIT].reshape(-1, 6))])
+    if element == "pyramid":
+        points, centres = _add_centres(points, hexes)
+        return Mesh(points, [CellBlock("pyramid", _pyramids(hexes, centres))])
+    raise MeshError(f"unknown 3D element {element!r} (hexahedron, tetra, tetra10, wedge, pyramid, mixed)")
+
+
+def _bar_2d(size, cells, origin, element):
+    """Rectangle of quads, or of quads cut into CCW triangles along diagonal 0-2.
+
+    'mixed' puts quads in the first half along x and triangles in the rest
+    (conforming: the triangle diagonals stay inside the cells).
+    """
+    points, grid = _hex_grid(size, cells, origin)
+    quads = grid.reshape(-1, 4)
+    tri_split = np.array([(0, 1, 2), (0, 2, 3)])
+    if element == "quad":
+        return Mesh(points, [CellBlock("quad", quads)])
+    if element in ("triangle", "triangle6"):
+        tris = quads[:, tri_split].reshape(-1, 3)
+        if element == "triangle6":
+            points, tris = _add_midsides(points, tris, _SIMPLEX_EDGES["triangle6"])
+        return Mesh(points, [CellBlock(element, tris)])
+    if element == "mixed":
+        if cells[0] < 2:
+            raise MeshError("element='mixed' needs at least 2 cells along x")
+        half = cells[0] // 2
+        return Mesh(points, [CellBlock("quad", grid[:half].reshape(-1, 4)),
+                             CellBlock("triangle", grid[half:].reshape(-1, 4)[:, tri_split].reshape(-1, 3))])
+    raise MeshError(f"unknown 2D element {element!r} (triangle, triangle6, quad, mixed)")
+
+
+def generate_bar(size=(1.0, 0.2, 0.2), cells=(10, 2, 2), element="hexahedron", origin=None) -> Mesh:
+    """A structured box [origin, origin + size] of positively oriented, conforming cells.
+
+    3D element: hexahedron; tetra (6 Kuhn tets per hex); tetra10 (the same with
+    shared midside nodes); wedge (2 per hex, extruded along z); pyramid (6 per
+    hex around a new centre node); mixed (see _mixed_bar_3d: hex | wedge |
+    pyramid | tet sections along x).  2D (size and cells of length 2): quad,
+    triangle, triangle6, mixed.
+    """
+    size, cells = tuple(float(s) for s in size), tuple(int(c) for c in cells)
+    dim = len(size)
+    if dim not in (2, 3) or len(cells) != dim:
+        raise MeshError(f"size and cells must both have 2 or 3 entries, got {size} and {cells}")
+    if min(cells) < 1 or not all(np.isfinite(size)) or min(size) <= 0:
+        raise MeshError(f"need positive cell counts and sizes, got cells={cells}, size={size}")
+    origin = np.zeros(dim) if origin is None else np.asarray(origin, dtype=float).reshape(-1)[:dim]
+    if origin.shape != (dim,):
+        raise MeshError(f"origin must have {dim} entries")
+    build = _bar_3d if dim == 3 else _bar_2d
+    return build(size, cells, origin, element)
