@@ -1,0 +1,162 @@
+"""The `tensormass` command line.
+
+    tensormass list                               the catalogue, with op and constant counts
+    tensormass generate --element tetra --law stvk --quadrature gauss1 --backend numba --out DIR
+    tensormass generate --check                   regenerate the catalogue and diff it with generated/
+
+Bad input exits with code 2 and a message naming the problem.
+"""
+from __future__ import annotations
+
+import argparse
+import filecmp
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .. import laws
+from .backends import BACKENDS
+from .catalogue import entries
+from .elements import ELEMENTS
+
+EXIT_BAD_INPUT = 2
+
+
+def committed_dir() -> Path:
+    """The generated/ folder of this installation (the committed catalogue)."""
+    from .. import generated
+    return Path(generated.__file__).resolve().parent
+
+
+def _names(values, known, kind):
+    """Flatten repeated/comma-separated options; 'all' or nothing means every known name."""
+    if not values:
+        return None
+    flat = [v for value in values for v in value.split(",") if v]
+    return None if "all" in flat else flat
+
+
+def cmd_list(args) -> int:
+    manifest = json.loads((committed_dir() / "manifest.json").read_text())["entries"]
+    rows = [("entry", "points", "constants", "ops energy", "ops forces", "ops f+K", "backends")]
+    for key, r in manifest.items():
+        rows.append((key, r["points"], r["constants"], r["ops"]["energy"], r["ops"]["forces"],
+                     r["ops"]["forces_and_stiffness"], ",".join(sorted(r["files"]))))
+    widths = [max(len(str(row[i])) for row in rows) for i in range(len(rows[0]))]
+    for row in rows:
+        print("  ".join(str(c).ljust(w) if i == 0 else str(c).rjust(w) for i, (c, w) in enumerate(zip(row, widths))))
+    print(f"{len(manifest)} entries; elements: {', '.join(ELEMENTS)}; laws: {', '.join(laws.names())}")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    from .pipeline import generate_all
+    selected = entries(_names(args.element, ELEMENTS, "element"), _names(args.law, laws.names(), "law"),
+                       _names(args.quadrature, None, "quadrature"))
+    backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
+    unknown = sorted(set(backends) - set(BACKENDS))
+    if unknown:
+        raise ValueError(f"unknown backend {', '.join(unknown)}; known: {', '.join(BACKENDS)}")
+    if args.check:
+        return check(selected, backends)
+    out = Path(args.out)
+    generate_all(selected, backends, out)
+    if "numba" in backends and not args.no_compile:
+        report_numba_compile_times(selected, out)
+    return 0
+
+
+def check(selected, backends) -> int:
+    """Regenerate into a temporary folder and compare byte for byte with generated/."""
+    from .pipeline import generate_all
+    committed = committed_dir()
+    with tempfile.TemporaryDirectory() as tmp:
+        generate_all(selected, backends, Path(tmp))
+        fresh = Path(tmp)
+        differing = []
+        for path in sorted(fresh.rglob("*")):
+            if path.is_file() and path.name != "manifest.json":
+                rel = path.relative_to(fresh)
+                old = committed / rel
+                if not old.exists() or not filecmp.cmp(path, old, shallow=False):
+                    differing.append(str(rel))
+        fresh_manifest = json.loads((fresh / "manifest.json").read_text())["entries"]
+        old_manifest = json.loads((committed / "manifest.json").read_text())["entries"]
+        for key, record in fresh_manifest.items():
+            if old_manifest.get(key) != record:
+                differing.append(f"manifest.json[{key}]")
+    if differing:
+        print(f"generated/ is out of date: {len(differing)} file(s) differ:", file=sys.stderr)
+        for name in differing:
+            print(f"  {name}", file=sys.stderr)
+        print("regenerate with: tensormass generate --out generated", file=sys.stderr)
+        return 1
+    print(f"generated/ is up to date ({len(selected)} entries, backends {', '.join(backends)})")
+    return 0
+
+
+def report_numba_compile_times(selected, out: Path) -> None:
+    """Import each generated numba module from `out` and time the first call of every kernel."""
+    import importlib.util
+
+    import numpy as np
+
+    from .elements import element
+    slowest = (0.0, "")
+    for entry in selected:
+        path = out / "numba" / f"{entry.name}.py"
+        spec = importlib.util.spec_from_file_location(f"_tm_compile_{entry.name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        X = np.array([[float(x) for x in node] for node in element(entry.element).nodes])[None].copy()
+        params = np.ones((1, len(module.PARAMETERS)))
+        D = np.empty((1, module.N_CONSTANTS))
+        flags = np.zeros(1, dtype=np.int32)
+        u = np.zeros_like(X)
+        n = module.N_NODES * module.DIM
+        t0 = time.perf_counter()
+        module.constants(X, params, D, flags)
+        module.energy(D, u, np.empty(1), flags)
+        module.forces(D, u, np.empty((1, n)), flags)
+        module.stiffness(D, u, np.empty((1, n, n)), flags)
+        module.forces_and_stiffness(D, u, np.empty((1, n)), np.empty((1, n, n)), flags)
+        seconds = time.perf_counter() - t0
+        slowest = max(slowest, (seconds, entry.name))
+        print(f"numba first call (compile) {entry.name}: {seconds:.2f} s")
+    if selected:
+        print(f"slowest numba compile: {slowest[1]} {slowest[0]:.2f} s")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tensormass", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("list", help="list the kernel catalogue with op and constant counts")
+    p.set_defaults(run=cmd_list)
+
+    p = sub.add_parser("generate", help="generate element x law x quadrature kernels")
+    p.add_argument("--element", nargs="+", help=f"element(s) or all: {', '.join(ELEMENTS)}")
+    p.add_argument("--law", nargs="+", help=f"law(s) or all: {', '.join(laws.names())}")
+    p.add_argument("--quadrature", nargs="+", help="quadrature(s) or all: gauss1 gauss2 gauss3 exact")
+    p.add_argument("--backend", nargs="+", help=f"backend(s) or all: {', '.join(BACKENDS)}")
+    p.add_argument("--out", default="tensormass-kernels", help="output folder (default: ./tensormass-kernels)")
+    p.add_argument("--check", action="store_true", help="regenerate into a temporary folder and diff with generated/")
+    p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
+    p.set_defaults(run=cmd_generate)
+    return parser
+
+
+def main(argv=None) -> int:
+    from ..runtime.errors import TensormassError
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except (TensormassError, ValueError, FileNotFoundError) as error:
+        print(f"tensormass: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

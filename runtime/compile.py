@@ -1,0 +1,374 @@
+"""Compile generated C kernels into shared libraries and call them through cffi (ABI mode).
+
+    module = c_module(entry)          # entry: .element .law .quadrature .name
+    module.forces_and_stiffness(D, u, f, K, flags)
+
+The source is the committed ``generated/c/<name>.c`` or, when the catalogue
+has none, a file generated on demand into the user cache. Libraries live in
+``cache_dir()/c/<name>-<hash>.so`` where the hash covers the source, the
+flags, the compiler and the CPU (``-march=native``); each has a sidecar
+``<so>.sha256`` that is checked before loading, so a truncated or corrupted
+library is rebuilt instead of crashing the process. Builds go to a temporary
+file in the same folder and are renamed into place: processes compiling the
+same kernel at once never see a half-written library.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .errors import KernelNotFoundError, TensormassError
+
+CFLAGS = ("-O3", "-march=native", "-fPIC", "-shared", "-std=c99", "-fno-math-errno")
+LIBS = ("-lm",)
+METADATA_TAG = "tensormass-metadata"
+
+# One record per library compiled by this process (name, path, seconds, peak compiler memory in MB).
+COMPILATIONS: list[dict] = []
+
+_lock = threading.Lock()
+_loaded: dict[str, "CModule"] = {}
+
+
+# -- compiler ---------------------------------------------------------------------------------
+def compiler() -> list[str]:
+    """The C compiler command: $CC (may hold arguments, e.g. "ccache gcc"), else cc, gcc or clang."""
+    cc = os.environ.get("CC", "").strip()
+    tried = [cc] if cc else ["cc", "gcc", "clang"]
+    for candidate in tried:
+        words = shlex.split(candidate)
+        path = shutil.which(words[0]) if words else None
+        if path:
+            return [path] + words[1:]
+    what = f"$CC={cc!r}" if cc else ", ".join(tried)
+    raise TensormassError(
+        f"no C compiler was found (tried {what}): install gcc (e.g. `apt-get install gcc`) "
+        f"or set $CC, or use backend=\"numba\"")
+
+
+def cflags() -> list[str]:
+    """CFLAGS, or $TENSORMASS_CFLAGS when set (-fPIC -shared are added when it lacks them)."""
+    override = os.environ.get("TENSORMASS_CFLAGS")
+    if override is None:
+        return list(CFLAGS)
+    flags = shlex.split(override)
+    return flags + [f for f in ("-fPIC", "-shared") if f not in flags]
+
+
+@lru_cache(maxsize=None)
+def _compiler_version(command: tuple) -> str:
+    try:
+        done = subprocess.run(list(command) + ["--version"], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.SubprocessError) as error:
+        raise TensormassError(f"C compiler {' '.join(command)!r} does not run: {error}") from None
+    return done.stdout + done.stderr
+
+
+@lru_cache(maxsize=None)
+def _cpu_signature() -> str:
+    """What -march=native depends on: the machine and, on Linux, the CPU model and feature flags."""
+    parts = [platform.machine(), platform.system()]
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
+            seen = set()
+            for line in handle:
+                key = line.split(":", 1)[0].strip()
+                if key in ("model name", "flags", "Features", "CPU part") and key not in seen:
+                    seen.add(key)
+                    parts.append(line.strip())
+    except OSError:
+        pass
+    return "\n".join(parts)
+
+
+# -- source -----------------------------------------------------------------------------------
+def source_path(entry) -> Path:
+    """The committed C file of the entry, else one generated on demand into the cache."""
+    from .. import generated
+    committed = Path(generated.__file__).resolve().parent / "c" / f"{entry.name}.c"
+    if committed.exists():
+        return committed
+    from .kernels import cache_dir
+    cached = cache_dir() / "c" / f"{entry.name}.c"
+    if not (cached.exists() and _fresh(cached)):
+        from ..generator.pipeline import generate_all
+        generate_all([entry], ["c"], cache_dir(), progress=None)
+    if not cached.exists():
+        raise KernelNotFoundError(f"could not generate C kernel {entry.name}")
+    return cached
+
+
+def _fresh(path: Path) -> bool:
+    """A cached source made by the current C templates (an older one is regenerated)."""
+    from ..generator.backends import templates_hash
+    try:
+        meta = parse_metadata(path.read_text(encoding="utf-8"), path)
+    except (OSError, TensormassError):
+        return False
+    return meta.get("templates") == templates_hash("c")[:16]
+
+
+def parse_metadata(source: str, where="source") -> dict:
+    """The JSON block the template writes in a comment near the top of every C kernel."""
+    for line in source.splitlines()[:10]:
+        start = line.find(METADATA_TAG)
+        if start >= 0:
+            text = line[start + len(METADATA_TAG):].rsplit("*/", 1)[0]
+            try:
+                return json.loads(text)
+            except ValueError:
+                break
+    raise TensormassError(f"{where}: no valid '{METADATA_TAG}' comment (not a tensormass C kernel?)")
+
+
+# -- building ---------------------------------------------------------------------------------
+def library_path(name: str, source: str, command: list[str], flags: list[str]) -> Path:
+    from .kernels import cache_dir
+    h = hashlib.sha256()
+    for part in (source, "\0".join(flags), "\0".join(command), _compiler_version(tuple(command)), _cpu_signature()):
+        h.update(part.encode())
+        h.update(b"\0\0")
+    return cache_dir() / "c" / f"{name}-{h.hexdigest()[:16]}.so"
+
+
+def _file_hash(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _sidecar(lib: Path) -> Path:
+    return lib.with_name(lib.name + ".sha256")
+
+
+def _verified(lib: Path) -> bool:
+    """The library exists and its bytes hash to what its sidecar recorded at build time."""
+    try:
+        expected = _sidecar(lib).read_text(encoding="ascii").split()[0]
+        return _file_hash(lib) == expected
+    except (OSError, IndexError, UnicodeDecodeError):
+        return False
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+# Runs the compiler as its only child and reports the peak memory of it and its children
+# (cc1, as, ld). A direct child of this (large) process would report this process's own
+# memory too: Linux carries ru_maxrss through fork and exec.
+_MEASURE = """
+import resource, subprocess, sys
+code = subprocess.run(sys.argv[2:]).returncode
+with open(sys.argv[1], "w") as out:
+    out.write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))
+sys.exit(code)
+"""
+
+
+def _run_measured(cmd: list[str]):
+    """Run cmd; returns (exit code, output text, seconds, peak memory in MB of the compiler)."""
+    with tempfile.TemporaryDirectory(prefix="tensormass-cc-") as folder:
+        rss_file = os.path.join(folder, "maxrss")
+        log_file = os.path.join(folder, "log")
+        measured = bool(sys.executable)
+        full = [sys.executable, "-I", "-S", "-c", _MEASURE, rss_file] + cmd if measured else cmd
+        with open(log_file, "wb") as log:
+            start = time.perf_counter()
+            proc = subprocess.Popen(full, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                    start_new_session=True)
+            try:
+                code = proc.wait()
+            except BaseException:
+                _kill_group(proc)
+                raise
+            seconds = time.perf_counter() - start
+        with open(log_file, "rb") as log:
+            output = log.read().decode("utf-8", errors="replace")
+        maxrss = 0.0
+        if measured:
+            try:
+                with open(rss_file, encoding="ascii") as handle:
+                    # ru_maxrss: kilobytes on Linux, bytes on macOS.
+                    maxrss = int(handle.read()) / ((1 << 20) if sys.platform == "darwin" else (1 << 10))
+            except (OSError, ValueError):
+                pass
+    return code, output, seconds, maxrss
+
+
+def _kill_group(proc) -> None:
+    try:
+        os.killpg(proc.pid, 9)
+    except OSError:
+        proc.kill()
+    proc.wait()
+
+
+def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str]) -> dict:
+    """Compile source into lib (atomically, with its sidecar hash); returns the compile record."""
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}.", suffix=".so.tmp")
+    os.close(fd)
+    try:
+        cmd = command + flags + ["-o", tmp, str(source)] + list(LIBS)
+        code, output, seconds, maxrss = _run_measured(cmd)
+        if code != 0:
+            tail = "\n".join(output.strip().splitlines()[-30:])
+            raise TensormassError(f"compiling C kernel {name} failed (exit code {code}):\n"
+                                  f"  {shlex.join(cmd)}\n{tail}")
+        digest = _file_hash(Path(tmp))
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, lib)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    _write_atomic(_sidecar(lib), f"{digest}  {lib.name}\n".encode("ascii"))
+    record = {"name": name, "library": str(lib), "seconds": seconds, "maxrss_mb": maxrss}
+    COMPILATIONS.append(record)
+    return record
+
+
+# -- loading ----------------------------------------------------------------------------------
+def _cdef(prefix: str) -> str:
+    return f"""
+void {prefix}_constants(long n, const double *X, const double *params, double *D, int *flags);
+void {prefix}_energy(long n, const double *D, const double *u, double *out, int *flags);
+void {prefix}_forces(long n, const double *D, const double *u, double *f, int *flags);
+void {prefix}_stiffness(long n, const double *D, const double *u, double *K, int *flags);
+void {prefix}_forces_and_stiffness(long n, const double *D, const double *u, double *f, double *K, int *flags);
+"""
+
+
+class CModule:
+    """A compiled kernel with the attributes and functions of a generated numba module."""
+
+    def __init__(self, meta: dict, ffi, lib, library: Path, source: Path, compiled: dict | None):
+        self._ffi, self._lib = ffi, lib
+        prefix = meta["name"]
+        self._functions = {kind: getattr(lib, f"{prefix}_{kind}")
+                           for kind in ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")}
+        self.NAME = meta["name"]
+        self.ELEMENT = meta["element"]
+        self.LAW = meta["law"]
+        self.QUADRATURE = meta["quadrature"]
+        self.DIM = int(meta["dim"])
+        self.N_NODES = int(meta["n_nodes"])
+        self.N_POINTS = int(meta["n_points"])
+        self.N_CONSTANTS = int(meta["n_constants"])
+        self.PARAMETERS = tuple(meta["parameters"])
+        self.REQUIRES_POSITIVE_J = bool(meta["requires_positive_J"])
+        self.OPS = dict(meta["ops"])
+        self.LIBRARY = library
+        self.SOURCE = source
+        self.COMPILED = compiled is not None
+        self.COMPILE_SECONDS = compiled["seconds"] if compiled else 0.0
+        self.COMPILE_MAXRSS_MB = compiled["maxrss_mb"] if compiled else 0.0
+        self._n_dofs = self.N_NODES * self.DIM
+
+    def __repr__(self):
+        return f"<C kernel {self.NAME} from {self.LIBRARY}>"
+
+    def _pointer(self, array, ctype: str, dtype, per_element: int, n: int, what: str, writable: bool):
+        if not isinstance(array, np.ndarray) or array.dtype != dtype or not array.flags.c_contiguous:
+            raise TensormassError(f"{self.NAME}: {what} must be a C-contiguous {np.dtype(dtype).name} numpy array")
+        if array.size != n * per_element:
+            raise TensormassError(f"{self.NAME}: {what} has {array.size} values, expected {n} x {per_element}")
+        if writable and not array.flags.writeable:
+            raise TensormassError(f"{self.NAME}: {what} is read-only")
+        return self._ffi.from_buffer(f"{ctype}[]", array, require_writable=writable)
+
+    def _double(self, array, per_element, n, what, writable=False):
+        return self._pointer(array, "double", np.float64, per_element, n, what, writable)
+
+    def _flags(self, flags, n):
+        return self._pointer(flags, "int", np.int32, 1, n, "flags", True)
+
+    def constants(self, X, params, D, flags):
+        n = len(X)
+        self._functions["constants"](
+            n, self._double(X, self._n_dofs, n, "X"), self._double(params, len(self.PARAMETERS), n, "params"),
+            self._double(D, self.N_CONSTANTS, n, "D", True), self._flags(flags, n))
+
+    def energy(self, D, u, out, flags):
+        n = len(D)
+        self._functions["energy"](
+            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            self._double(out, 1, n, "out", True), self._flags(flags, n))
+
+    def forces(self, D, u, f, flags):
+        n = len(D)
+        self._functions["forces"](
+            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            self._double(f, self._n_dofs, n, "f", True), self._flags(flags, n))
+
+    def stiffness(self, D, u, K, flags):
+        n = len(D)
+        self._functions["stiffness"](
+            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            self._double(K, self._n_dofs ** 2, n, "K", True), self._flags(flags, n))
+
+    def forces_and_stiffness(self, D, u, f, K, flags):
+        n = len(D)
+        self._functions["forces_and_stiffness"](
+            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            self._double(f, self._n_dofs, n, "f", True), self._double(K, self._n_dofs ** 2, n, "K", True),
+            self._flags(flags, n))
+
+
+def _open(meta: dict, lib: Path, source: Path, compiled):
+    import cffi
+    ffi = cffi.FFI()
+    ffi.cdef(_cdef(meta["name"]))
+    handle = ffi.dlopen(str(lib))
+    return CModule(meta, ffi, handle, lib, source, compiled)
+
+
+def c_module(entry) -> CModule:
+    """The compiled C kernel of a catalogue entry: from the cache when valid, else compiled now."""
+    command = compiler()
+    flags = cflags()
+    source = source_path(entry)
+    text = source.read_text(encoding="utf-8")
+    meta = parse_metadata(text, source)
+    if meta.get("name") != entry.name:
+        raise TensormassError(f"{source}: holds kernel {meta.get('name')!r}, expected {entry.name!r}")
+    lib = library_path(entry.name, text, command, flags)
+    with _lock:
+        module = _loaded.get(str(lib))
+        if module is not None and _verified(lib):
+            return module
+        compiled = None
+        if not _verified(lib):
+            compiled = build(entry.name, source, lib, command, flags)
+        try:
+            module = _open(meta, lib, source, compiled)
+        except (OSError, AttributeError):
+            if compiled is not None:
+                raise
+            # The hash matched but the library does not load (or lacks a symbol): build it again.
+            compiled = build(entry.name, source, lib, command, flags)
+            module = _open(meta, lib, source, compiled)
+        _loaded[str(lib)] = module
+        return module

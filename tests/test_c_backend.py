@@ -1,0 +1,258 @@
+"""The C backend: same numbers as numba, deterministic source, a safe library cache."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import tensormass.runtime.compile as cc
+from tensormass.generator.backends import generate
+from tensormass.generator.catalogue import Entry
+from tensormass.generator.ir import build_ir
+from tensormass.runtime.errors import DegenerateElementError, InvertedElementError, TensormassError
+from tensormass.runtime.kernels import load_kernel
+
+from helpers import random_elements
+
+SAMPLE = [
+    ("tetra", "stvk", "gauss1"),
+    ("hexahedron", "neohookean", "gauss2"),
+    ("wedge", "mooney_rivlin", "gauss2"),
+    ("pyramid", "stable_neohookean", "gauss2"),
+    ("triangle6", "hooke", "exact"),
+    ("quad", "neohookean", "gauss2"),
+]
+RTOL = 1e-12
+N = 40
+
+
+def close(a, b, what):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape, what
+    scale = max(float(np.abs(b).max()), 1e-300)
+    err = float(np.abs(a - b).max()) / scale
+    assert err <= RTOL, f"{what}: relative difference {err:.3e}"
+
+
+@pytest.fixture(scope="module", params=SAMPLE, ids=lambda p: "_".join(p))
+def pair(request):
+    element, law, quadrature = request.param
+    return load_kernel(element, law, quadrature, backend="numba"), load_kernel(element, law, quadrature, backend="c")
+
+
+def test_same_metadata(pair):
+    numba, c = pair
+    for attr in ("ELEMENT", "LAW", "QUADRATURE", "DIM", "N_NODES", "N_POINTS", "N_CONSTANTS",
+                 "REQUIRES_POSITIVE_J"):
+        assert getattr(c.module, attr) == getattr(numba.module, attr), attr
+    assert tuple(c.module.PARAMETERS) == tuple(numba.module.PARAMETERS)
+    assert dict(c.module.OPS) == dict(numba.module.OPS)
+
+
+def test_same_results(pair):
+    numba, c = pair
+    exact = numba.quadrature == "exact"          # needs straight edges: no node perturbation
+    X = random_elements(numba.element, N, seed=7, distortion=0.0 if exact else 0.08)
+    D = numba.constants(X, E=2.5e3, nu=0.35)
+    close(c.constants(X, E=2.5e3, nu=0.35), D, "constants")
+    u = 0.05 * np.random.default_rng(11).standard_normal((N, numba.n_nodes, numba.dim))
+    assert not numba.inverted(D, u).any()
+    close(c.energy(D, u), numba.energy(D, u), "energy")
+    close(c.forces(D, u), numba.forces(D, u), "forces")
+    close(c.stiffness(D, u), numba.stiffness(D, u), "stiffness")
+    fc, Kc = c.forces_and_stiffness(D, u)
+    fn, Kn = numba.forces_and_stiffness(D, u)
+    close(fc, fn, "forces_and_stiffness: f")
+    close(Kc, Kn, "forces_and_stiffness: K")
+    close(Kc, np.swapaxes(Kc, 1, 2), "K symmetric")
+
+
+def test_inverted_elements_same_error():
+    numba = load_kernel("hexahedron", "neohookean", "gauss2", backend="numba")
+    c = load_kernel("hexahedron", "neohookean", "gauss2", backend="c")
+    X = random_elements("hexahedron", 8, seed=3)
+    D = numba.constants(X, E=1e3, nu=0.3)
+    u = np.zeros_like(X)
+    u[[2, 5]] = -2.0 * X[[2, 5]]                 # F = -I: det F = -1 at every point
+    for name in ("energy", "forces", "stiffness", "forces_and_stiffness"):
+        errors = []
+        for kernel in (numba, c):
+            with pytest.raises(InvertedElementError) as info:
+                getattr(kernel, name)(D, u)
+            errors.append(info.value)
+        assert str(errors[0]) == str(errors[1])
+        np.testing.assert_array_equal(errors[1].elements, [2, 5])
+
+
+def test_degenerate_and_curved_rest_elements():
+    for element, law, quadrature, X in [
+        ("tetra", "stvk", "gauss1", random_elements("tetra", 4, seed=5)[:, [1, 0, 2, 3]]),   # mirrored
+        ("triangle6", "hooke", "exact", random_elements("triangle6", 4, seed=5, distortion=0.1)),  # curved
+    ]:
+        messages = []
+        for backend in ("numba", "c"):
+            with pytest.raises(DegenerateElementError) as info:
+                load_kernel(element, law, quadrature, backend=backend).constants(X, E=1e3, nu=0.3)
+            messages.append(str(info.value))
+        assert messages[0] == messages[1]
+
+
+def test_wrong_arrays_refused():
+    module = load_kernel("tetra", "stvk", "gauss1", backend="c").module
+    D = np.zeros((3, module.N_CONSTANTS))
+    u = np.zeros((3, 4, 3))
+    with pytest.raises(TensormassError, match="float64"):
+        module.energy(D, u.astype(np.float32), np.empty(3), np.zeros(3, np.int32))
+    with pytest.raises(TensormassError, match="expected"):
+        module.energy(D, u[:2], np.empty(3), np.zeros(3, np.int32))
+    with pytest.raises(TensormassError, match="contiguous"):
+        module.forces(D, u, np.empty((12, 3)).T, np.zeros(3, np.int32))
+
+
+# -- generated source -------------------------------------------------------------------------
+def test_source_deterministic_with_metadata():
+    ir = build_ir("tetra", "stvk", "gauss1")
+    first, second = generate(ir, "c"), generate(build_ir("tetra", "stvk", "gauss1"), "c")
+    assert first == second
+    assert first.startswith("/* generated by tensormass ")
+    assert "#include <math.h>" in first
+    meta = cc.parse_metadata(first)
+    assert meta["name"] == "tetra_stvk_gauss1" and meta["n_constants"] == ir.n_constants
+    for kind in ("constants", "energy", "forces", "stiffness", "forces_and_stiffness"):
+        assert f"void tetra_stvk_gauss1_{kind}(long n," in first
+
+
+# -- library cache ----------------------------------------------------------------------------
+ENTRY = Entry("tetra", "stvk", "gauss1")
+
+LOAD = """
+import json
+from tensormass.generator.catalogue import Entry
+from tensormass.runtime.compile import c_module
+m = c_module(Entry("tetra", "stvk", "gauss1"))
+print(json.dumps({"compiled": m.COMPILED, "library": str(m.LIBRARY), "seconds": m.COMPILE_SECONDS}))
+"""
+
+
+def load_in_new_process(cache) -> dict:
+    env = {**os.environ, "TENSORMASS_CACHE": str(cache)}
+    done = subprocess.run([sys.executable, "-c", LOAD], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def check_module(module):
+    """The library computes what numba computes."""
+    numba = load_kernel("tetra", "stvk", "gauss1", backend="numba")
+    X = random_elements("tetra", 5, seed=1)
+    D = numba.constants(X, E=1e3, nu=0.3)
+    u = 0.05 * np.random.default_rng(2).standard_normal(X.shape)
+    f, K, flags = np.empty((5, 12)), np.empty((5, 12, 12)), np.zeros(5, np.int32)
+    module.forces_and_stiffness(D, u, f, K, flags)
+    fn, Kn = numba.forces_and_stiffness(D, u)
+    close(f, fn, "f")
+    close(K, Kn, "K")
+
+
+@pytest.fixture
+def built(tmp_path, monkeypatch):
+    """A library built by another process into an empty cache: (cache folder, library path)."""
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
+    monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
+    first = load_in_new_process(tmp_path)
+    assert first["compiled"] and first["seconds"] > 0
+    return tmp_path, first["library"]
+
+
+def test_second_process_does_not_recompile(built):
+    cache, library = built
+    mtime = os.stat(library).st_mtime_ns
+    second = load_in_new_process(cache)
+    assert second == {"compiled": False, "library": library, "seconds": 0.0}
+    assert os.stat(library).st_mtime_ns == mtime
+    # This process: the same library, loaded without compiling.
+    before = len(cc.COMPILATIONS)
+    module = cc.c_module(ENTRY)
+    assert str(module.LIBRARY) == library and not module.COMPILED
+    assert module.COMPILE_SECONDS == 0 and module.COMPILE_MAXRSS_MB == 0
+    assert len(cc.COMPILATIONS) == before
+    check_module(module)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "no-sidecar"])
+def test_damaged_library_is_rebuilt(built, damage):
+    _, library = built
+    data = open(library, "rb").read()
+    if damage == "garbage":
+        with open(library, "wb") as handle:
+            handle.write(os.urandom(len(data)))
+    elif damage == "truncated":
+        with open(library, "wb") as handle:
+            handle.write(data[: len(data) // 2])
+    else:
+        os.remove(library + ".sha256")
+    module = cc.c_module(ENTRY)
+    assert module.COMPILED and module.COMPILE_SECONDS > 0 and module.COMPILE_MAXRSS_MB > 0
+    assert str(module.LIBRARY) == library
+    assert cc.COMPILATIONS[-1]["library"] == library
+    check_module(module)
+    leftovers = [p for p in os.listdir(os.path.dirname(library)) if p.endswith(".tmp")]
+    assert leftovers == []
+
+
+def test_concurrent_builds(tmp_path, monkeypatch):
+    """Processes compiling the same kernel at once all get a working library; no temporary files stay."""
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
+    monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
+    cc.source_path(ENTRY)                         # generate the source once, then race the compilers
+    env = {**os.environ, "TENSORMASS_CACHE": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", LOAD], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    results = []
+    for proc in procs:
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    assert len({r["library"] for r in results}) == 1
+    module = cc.c_module(ENTRY)
+    assert not module.COMPILED
+    check_module(module)
+    folder = os.path.dirname(results[0]["library"])
+    assert [p for p in os.listdir(folder) if p.endswith(".tmp")] == []
+
+
+def test_missing_compiler(tmp_path, monkeypatch):
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    monkeypatch.setenv("PATH", "")
+    with pytest.raises(TensormassError, match="no C compiler was found") as info:
+        cc.c_module(ENTRY)
+    assert "apt-get install gcc" in str(info.value) and "numba" in str(info.value)
+    monkeypatch.delenv("CC")
+    monkeypatch.setattr(cc.shutil, "which", lambda name: None)
+    with pytest.raises(TensormassError, match="no C compiler was found"):
+        cc.c_module(ENTRY)
+
+
+def test_compile_error_shows_compiler_output(tmp_path, monkeypatch):
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
+    source = cc.source_path(ENTRY)
+    if not source.is_relative_to(tmp_path):
+        pytest.skip("the committed C source is used; not editing it")
+    with open(source, "a", encoding="utf-8") as handle:
+        handle.write("\n#error tensormass-test-broken-source\n")
+    with pytest.raises(TensormassError, match="tensormass-test-broken-source"):
+        cc.c_module(ENTRY)
+    assert not any(p.name.endswith(".so") for p in source.parent.iterdir())
+
+
+def test_cflags_override(monkeypatch):
+    monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
+    assert cc.cflags() == list(cc.CFLAGS)
+    assert "-ffast-math" not in cc.CFLAGS
+    monkeypatch.setenv("TENSORMASS_CFLAGS", "-O1 -std=c99")
+    assert cc.cflags() == ["-O1", "-std=c99", "-fPIC", "-shared"]
