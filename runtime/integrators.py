@@ -1,0 +1,444 @@
+"""Time integrators and the static solver, all on one shared Context (state, assembly, solvers).
+
+    ctx = Context(model)
+    integ = make_integrator(ctx)          # by model.solver.kind
+    for k in range(1, integ.n_steps + 1):
+        info = integ.step(k)              # advances ctx.u, ctx.v, ctx.t
+
+Conventions: u, v are global node-major vectors; f_int = -dW/du comes from the
+kernels, K = d2W/du2 = -df_int/du.  Fixed dofs follow the model's prescribed
+displacement: ramped with the load factor (static) or linearly over the whole
+run (dynamic), so their velocity is constant; clamped dofs stay at zero.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from .. import laws
+from .assembly import Assembler
+from .errors import InvertedElementError, TensormassError
+from .solvers import ConstrainedSystem, LinearSolver
+
+__all__ = ["Context", "make_integrator", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
+           "newton", "stable_time_step"]
+
+# Line search: Armijo constant, halvings, and the relative round-off allowance on energies.
+_ARMIJO = 1e-4
+_MAX_HALVINGS = 30
+_ROUNDOFF = 1e-12
+# Energy changes below this (relative) may be round-off: then the residual decides.
+_NOISE = 1e-6
+# Dynamic steps that fail (NaN, inversion, no convergence) are retried with dt/2 this many times.
+_MAX_DT_HALVINGS = 3
+
+
+class Context:
+    """What every integrator shares: the model, its assembler, Dirichlet elimination, the state."""
+
+    def __init__(self, model, assembler: Assembler | None = None):
+        self.model = model
+        s = model.solver
+        self.asm = assembler if assembler is not None else Assembler(model)
+        self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs)
+        self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
+        # PSD projection of element Hessians (non-Hooke parts): True always, False never,
+        # None "on demand": Newton solvers switch it on when a direction fails to descend
+        self.project = None if s.project_psd is None else bool(s.project_psd)
+        self.u = np.zeros(model.n_dofs)
+        self.v = np.zeros(model.n_dofs)
+        self.t = 0.0
+        self.newton_iterations = 0
+        self.linear_iterations = 0
+
+    def solve(self, data, b, x_c=None, x0=None):
+        """Eliminate the fixed dofs (values x_c) and solve; counts linear iterations."""
+        x, its = self.system.solve(self.linear, data, b, x_c, x0)
+        self.linear_iterations += its
+        return x
+
+    def add_diagonal(self, data, diag):
+        out = data.copy()
+        out[self.asm.pattern.diagonal] += diag
+        return out
+
+    def check_not_inverted(self, u):
+        """Raise InvertedElementError if u inverts an element of a law undefined there."""
+        for p in self.model.parts:
+            if laws.get(p.law).requires_positive_J:
+                bad = p.kernel.inverted(p.D, self.model.element_displacements(p, u))
+                if bad.any():
+                    raise InvertedElementError(f"law {p.law!r}: det F <= 0", p.cell_ids[bad])
+
+
+# --------------------------------------------------------------------------- Newton
+
+
+class _Potential:
+    """Total potential Pi(u) = W(u) - f_ext.u (+ optional quadratic inertia/damping terms)."""
+
+    def __init__(self, asm, f_ext):
+        self.asm, self.f_ext = asm, f_ext
+        self.free = asm.model.free_dofs
+
+    def extra(self, u):
+        """(value, gradient, magnitude) of quadratic terms; none for statics."""
+        return 0.0, 0.0, 0.0
+
+    def value(self, u):
+        """(Pi, magnitude for round-off); +inf where an element inverts for a law undefined there."""
+        try:
+            W = self.asm.energy(u)
+        except InvertedElementError:
+            return np.inf, 0.0
+        work = float(self.f_ext @ u)
+        q, _, qmag = self.extra(u)
+        return W - work + q, abs(W) + abs(work) + qmag
+
+    def gradient(self, u):
+        _, dq, _ = self.extra(u)
+        return dq - self.asm.forces(u) - self.f_ext
+
+    def force_scale(self, u):
+        """Forces that set the convergence tolerance: the external load (plus inertia, below)."""
+        return np.linalg.norm(self.f_ext[self.free])
+
+    def hessian(self, u, project):
+        return self.asm.stiffness(u, project)
+
+
+class _IncrementalPotential(_Potential):
+    """Backward Euler: Pi + 1/(2h^2)|x - x_pred|_M^2 + 1/(2h)|x - x_n|_D^2, D = alpha M + beta K_n."""
+
+    def __init__(self, asm, f_ext, mass, h, u_n, v_n, alpha, K_n):
+        super().__init__(asm, f_ext)
+        self.mass, self.h, self.u_n = mass, h, u_n
+        self.u_pred = u_n + h * v_n
+        self.alpha, self.K_n = alpha, K_n              # K_n: CSR (beta already folded in) or None
+
+    def _damping(self, x):
+        out = self.alpha * self.mass * x
+        return out if self.K_n is None else out + self.K_n @ x
+
+    def extra(self, u):
+        a, b = u - self.u_pred, u - self.u_n
+        Ma, Db = self.mass * a, self._damping(b)
+        q = 0.5 * (a @ Ma) / self.h**2 + 0.5 * (b @ Db) / self.h
+        return q, Ma / self.h**2 + Db / self.h, abs(q)
+
+    def force_scale(self, u):
+        # a body moving without load still needs a force scale: its inertia forces
+        _, dq, _ = self.extra(u)
+        return max(super().force_scale(u), np.linalg.norm(dq[self.free]))
+
+    def hessian(self, u, project):
+        data = self.asm.stiffness(u, project)
+        data[self.asm.pattern.diagonal] += self.mass * (1.0 / self.h**2 + self.alpha / self.h)
+        if self.K_n is not None:
+            data += self.K_n.data / self.h
+        return data
+
+
+def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndarray, where: str):
+    """Minimise the potential over the free dofs with u[fixed] -> target_c; returns (u, iterations)."""
+    model, s = ctx.model, ctx.model.solver
+    fixed, free = model.fixed_dofs, model.free_dofs
+    project = ctx.project is True
+    fallback = ctx.project is None        # may switch projection on for this solve
+    u = u.copy()
+    g = potential.gradient(u)
+    Pi, mag = potential.value(u)
+    force_scale = max(potential.force_scale(u), 1e-30)
+    res = np.inf
+    for it in range(1, s.newton_max_iterations + 1):
+        du_c = target_c - u[fixed]
+        moving = bool(np.any(du_c))
+        # reactions (gradient on fixed dofs) set the force scale when there is no load
+        scale = max(force_scale, np.linalg.norm(g[fixed]))
+        res = np.linalg.norm(g[free])
+        if not moving and res <= s.newton_tolerance * scale:
+            return u, it - 1
+        try:
+            d = ctx.solve(potential.hessian(u, project), -g, du_c)
+        except TensormassError:
+            if fallback and not project:            # e.g. CG on an indefinite matrix
+                project = True
+                continue
+            raise
+        ctx.newton_iterations += 1
+        slope = float(g @ d)
+        if not moving and slope >= 0.0:
+            if fallback and not project:            # indefinite Hessian: retry with PSD projection
+                project = True
+                continue
+            raise TensormassError(f"{where}: Newton direction is not a descent direction even with "
+                                  f"PSD projection (residual {res:.3e}); a singular stiffness? "
+                                  "check that every rigid-body motion is fixed")
+        found = _line_search(potential, u, d, g, Pi, mag, slope, moving)
+        if found is None:
+            if fallback and not project:
+                project = True
+                continue
+            raise TensormassError(f"{where}: line search failed (residual {res:.3e}); the load step is too "
+                                  "large or elements invert: use more steps")
+        u_new, a, Pi, mag, g_new = found
+        tiny = np.abs(a * d).max() <= 1e-13 * max(np.abs(u_new).max(), 1e-9 * model.size)
+        u = u_new
+        g = potential.gradient(u) if g_new is None else g_new
+        if tiny and not np.any(target_c - u[fixed]):
+            return u, it
+    res = np.linalg.norm(g[free])
+    raise TensormassError(f"{where}: Newton did not converge in {s.newton_max_iterations} iterations "
+                          f"(residual {res:.3e}, tolerance {s.newton_tolerance * scale:.3e}); "
+                          "use more steps or a larger newton_max_iterations")
+
+
+def _line_search(potential, u, d, g, Pi0, mag0, slope, moving):
+    """Backtracking: halve until Pi decreases enough (or, while boundaries move, is finite).
+
+    Returns (u, a, Pi, magnitude, gradient or None).  Near a solution the energy
+    change drowns in round-off (I1 - 3 at small strain cancels ~1/strain^2 digits),
+    so a full step whose energy change is tiny is also accepted when it halves
+    the residual.
+    """
+    a = 1.0
+    for _ in range(_MAX_HALVINGS):
+        trial = u + a * d
+        Pi, mag = potential.value(trial)
+        if moving:
+            ok = np.isfinite(Pi)
+        else:
+            ok = Pi <= Pi0 + _ARMIJO * a * slope + _ROUNDOFF * max(mag, mag0)
+        if ok:
+            return trial, a, Pi, mag, None
+        if a == 1.0 and not moving and abs(Pi - Pi0) <= _NOISE * max(mag, mag0):
+            g_trial = potential.gradient(trial)
+            free = potential.free
+            if np.linalg.norm(g_trial[free]) <= 0.5 * np.linalg.norm(g[free]):
+                return trial, a, Pi, mag, g_trial
+        a *= 0.5
+    return None
+
+
+# --------------------------------------------------------------------------- integrators
+
+
+class _Integrator:
+    kind = ""
+
+    def __init__(self, ctx: Context):
+        self.ctx, self.model = ctx, ctx.model
+        self.n_steps = int(ctx.model.solver.steps)
+        if self.n_steps < 1:
+            raise TensormassError(f"solver.steps must be >= 1, got {self.n_steps}")
+
+    def prescribed(self, fraction: float) -> np.ndarray:
+        return min(max(fraction, 0.0), 1.0) * self.model.prescribed
+
+
+class Static(_Integrator):
+    """Load stepping with Newton + line search on Pi(u) = W(u) - lambda f_ext.u."""
+    kind = "static"
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        if self.model.n_user_fixed == 0:
+            raise TensormassError("static: no node is fixed, so the body can move as a rigid body and has "
+                                  "no equilibrium; add a fixed box (or use a dynamic solver)")
+
+    def step(self, k: int) -> dict:
+        ctx, lam = self.ctx, k / self.n_steps
+        before = ctx.newton_iterations
+        potential = _Potential(ctx.asm, lam * self.model.f_ext)
+        ctx.u, _ = newton(ctx, potential, ctx.u, self.prescribed(lam),
+                          f"static: load step {k}/{self.n_steps}")
+        ctx.t = lam
+        return {"time": lam, "newton": ctx.newton_iterations - before}
+
+
+class _Dynamic(_Integrator):
+    """Fixed-dt time stepping; a failed step is retried as two half steps (a few times)."""
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        s = self.model.solver
+        self.dt = float(s.dt)
+        if not (self.dt > 0 and np.isfinite(self.dt)):
+            raise TensormassError(f"solver.dt must be > 0, got {s.dt}")
+        self.alpha, self.beta = (float(x) for x in s.rayleigh)
+        self.duration = self.dt * self.n_steps
+        self.mass = self.model.mass
+
+    def boundary_velocity(self):
+        """Velocity of the fixed dofs under the linear ramp over the run."""
+        return self.model.prescribed / self.duration
+
+    def step(self, k: int) -> dict:
+        ctx = self.ctx
+        before = ctx.newton_iterations
+        ctx.u, ctx.v = self._advance(ctx.u, ctx.v, ctx.t, self.dt, 0, k)
+        ctx.t = k * self.dt
+        return {"time": ctx.t, "newton": ctx.newton_iterations - before}
+
+    def _advance(self, u, v, t, h, depth, k):
+        try:
+            u1, v1 = self.single(u, v, t, h)
+            if not (np.all(np.isfinite(u1)) and np.all(np.isfinite(v1))):
+                raise TensormassError("the step produced NaN/Inf")
+            self.ctx.check_not_inverted(u1)
+            return u1, v1
+        except TensormassError as exc:
+            if depth >= _MAX_DT_HALVINGS:
+                raise TensormassError(f"{self.kind}: step {k} failed even with dt = {h:.3g} "
+                                      f"({self.dt:.3g} halved {depth} times): {exc}") from None
+            u, v = self._advance(u, v, t, h / 2, depth + 1, k)
+            return self._advance(u, v, t + h / 2, h / 2, depth + 1, k)
+
+
+class ImplicitEuler(_Dynamic):
+    """Baraff-Witkin linearly implicit Euler, one linearisation per step:
+
+    (M + h D + h^2 K) dv = h (f(x, v) - h K v),  f = f_int + f_ext - D v,  D = alpha M + beta K.
+    """
+    kind = "implicit_euler"
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self._last_dv = None
+
+    def single(self, u, v, t, h):
+        ctx = self.ctx
+        f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
+        Kv = ctx.asm.matrix(K) @ v
+        f = f_int + self.model.f_ext - self.alpha * self.mass * v - self.beta * Kv
+        A = ctx.add_diagonal((h * self.beta + h * h) * K, (1.0 + h * self.alpha) * self.mass)
+        dv_c = self.boundary_velocity() - v[self.model.fixed_dofs]
+        # CG starts from the previous step's dv: consecutive steps change v alike
+        dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv)
+        self._last_dv = dv if h == self.dt else None
+        ctx.newton_iterations += 1
+        v1 = v + dv
+        return u + h * v1, v1
+
+
+class BackwardEuler(_Dynamic):
+    """Fully implicit Euler: Newton on the incremental potential (see _IncrementalPotential)."""
+    kind = "backward_euler"
+
+    def single(self, u, v, t, h):
+        ctx = self.ctx
+        K_n = None
+        if self.beta:
+            K_n = ctx.asm.matrix(self.beta * ctx.asm.stiffness(u, ctx.project is True))
+        potential = _IncrementalPotential(ctx.asm, self.model.f_ext, self.mass, h, u, v, self.alpha, K_n)
+        target = self.prescribed((t + h) / self.duration)
+        u1, _ = newton(ctx, potential, u, target, f"backward_euler: time {t + h:.6g}")
+        return u1, (u1 - u) / h
+
+
+class Explicit(_Dynamic):
+    """Symplectic Euler: v += h M^-1 f(x, v); x += h v.  Stops when it detects instability."""
+    kind = "explicit"
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        free = self.model.free_dofs
+        if np.any(self.mass[free] <= 0):
+            raise TensormassError("explicit integration needs a positive mass at every free node (density > 0)")
+        self.inv_mass = np.where(self.mass > 0, 1.0 / np.maximum(self.mass, 1e-300), 0.0)
+        self.stable_dt = None             # set by the Simulation (stable_time_step)
+        self._growth = 0
+        self._speed = 0.0
+
+    def single(self, u, v, t, h):
+        ctx, free, fixed = self.ctx, self.model.free_dofs, self.model.fixed_dofs
+        f_int = ctx.asm.forces(u)
+        f = f_int + self.model.f_ext - self.alpha * self.mass * v
+        if self.beta:
+            f -= self.beta * _stiffness_times(ctx.asm, u, v, f_int, self.model.size)
+        v1 = v.copy()
+        v1[free] += h * self.inv_mass[free] * f[free]
+        v1[fixed] = self.boundary_velocity()
+        return u + h * v1, v1
+
+    def step(self, k: int) -> dict:
+        # no dt halving here: an explicit blow-up is a too-large dt, reported clearly
+        ctx = self.ctx
+        u1, v1 = self.single(ctx.u, ctx.v, ctx.t, self.dt)
+        self._check(u1, v1, k)
+        ctx.u, ctx.v, ctx.t = u1, v1, k * self.dt
+        return {"time": ctx.t, "newton": 0}
+
+    def _check(self, u, v, k):
+        """Unstable: NaN/Inf, displacement > 1e3 x size, or |v| growing > 1.5x for 20 steps running."""
+        finite = np.all(np.isfinite(u)) and np.all(np.isfinite(v))
+        speed = float(np.linalg.norm(v)) if finite else np.inf
+        self._growth = self._growth + 1 if speed > 1.5 * self._speed and speed > 0 else 0
+        self._speed = speed
+        huge = finite and np.abs(u).max() > 1e3 * self.model.size
+        if finite and not huge and self._growth < 20:
+            return
+        crit = self.stable_dt
+        if crit is not None and self.dt > crit:
+            why = f"dt = {self.dt:.3g} exceeds the estimated stable step {crit:.3g}"
+        elif crit is not None:
+            why = (f"dt = {self.dt:.3g} is below the estimated stable step {crit:.3g} at rest, "
+                   "but the deformed body is stiffer")
+        else:
+            why = f"dt = {self.dt:.3g} is probably above the stable step"
+        raise TensormassError(f"explicit integration unstable at step {k}: {why}; reduce dt or use "
+                              "implicit_euler / backward_euler")
+
+
+def _stiffness_times(asm, u, x, f_int, size):
+    """K x by a forward difference of the forces (explicit runs load no stiffness kernel)."""
+    norm = np.abs(x).max()
+    if norm == 0:
+        return np.zeros_like(x)
+    eps = 1e-7 * size / norm
+    return (f_int - asm.forces(u + eps * x)) / eps
+
+
+def stable_time_step(ctx: Context) -> float:
+    """2 / omega_max at rest, omega_max^2 = largest eigenvalue of M^-1 K on the free dofs.
+
+    K x comes from central differences of the forces, so only the forces kernel is
+    needed; the eigenvalue from Lanczos (eigsh) on M^-1/2 K M^-1/2.
+    """
+    model, asm = ctx.model, ctx.asm
+    free = model.free_dofs
+    m = model.mass[free]
+    if free.size == 0 or np.any(m <= 0):
+        return np.inf if free.size == 0 else 0.0
+    scale = 1.0 / np.sqrt(m)
+    zero = np.zeros(model.n_dofs)
+
+    def matvec(x):
+        y = zero.copy()
+        y[free] = scale * np.ravel(x)
+        eps = 1e-6 * model.size / max(np.abs(y).max(), 1e-300)
+        Ky = (asm.forces(-eps * y) - asm.forces(eps * y)) / (2 * eps)
+        return scale * Ky[free]
+
+    n = free.size
+    if n <= 60:
+        A = np.column_stack([matvec(e) for e in np.eye(n)])
+        lam = float(np.linalg.eigvalsh(0.5 * (A + A.T)).max())
+    else:
+        op = spla.LinearOperator((n, n), matvec=matvec, dtype=float)
+        v0 = np.random.default_rng(0).standard_normal(n)
+        lam = float(spla.eigsh(op, k=1, which="LA", tol=1e-4, v0=v0, ncv=min(n - 1, 30),
+                               return_eigenvectors=False)[0])
+    return 2.0 / np.sqrt(lam) if lam > 0 else np.inf
+
+
+_KINDS = {"static": Static, "implicit_euler": ImplicitEuler, "backward_euler": BackwardEuler,
+          "explicit": Explicit}
+
+
+def make_integrator(ctx: Context):
+    kind = ctx.model.solver.kind
+    try:
+        return _KINDS[kind](ctx)
+    except KeyError:
+        raise TensormassError(f"unknown solver kind {kind!r}; known: {', '.join(_KINDS)}") from None

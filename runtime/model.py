@@ -1,0 +1,359 @@
+"""The discrete model: a mesh cut into kernel "parts", masses, constraints and loads.
+
+    model = Model.from_scene(scene)           # or Model(mesh, materials, fixed=..., loads=...)
+    model.parts[0].kernel, model.parts[0].D   # one (element, law, quadrature) group each
+
+Dofs are node-major: dof = node * dim + component.  Everything here is built
+once; the integrators only read it.  Only the kernels a scene needs are loaded
+(`Model.required_kernels`), and only the outputs its solver calls are compiled
+(`Model.warm_up`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import laws
+from . import kernels as _kernels
+from .errors import ElementError, TensormassError
+from .mesh import NODES_PER_CELL, Mesh, boundary_faces, check_mesh, generate_bar, read_mesh
+from .scene import Loads, Output, Solver
+
+__all__ = ["Model", "Part", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
+
+# Kernel outputs each solver kind calls; energy only serves the line search and reports.
+_OUTPUTS = {
+    "explicit": ("forces",),
+    "implicit_euler": ("energy", "forces", "stiffness"),
+    "backward_euler": ("energy", "forces", "stiffness"),
+    "static": ("energy", "forces", "stiffness"),
+}
+# Relative tolerance for "inside a box" (times the mesh diagonal): nodes on a face count.
+_BOX_TOL = 1e-8
+
+
+def outputs_for(kind: str) -> tuple:
+    """The kernel outputs a solver kind needs."""
+    try:
+        return _OUTPUTS[kind]
+    except KeyError:
+        raise TensormassError(f"unknown solver kind {kind!r}; known: {', '.join(_OUTPUTS)}") from None
+
+
+@dataclass
+class Part:
+    """All cells sharing one (element, law, quadrature) kernel."""
+    element: str
+    law: str
+    quadrature: str
+    kernel: object               # runtime.kernels.Kernel
+    cells: np.ndarray            # (n, k) node ids
+    cell_ids: np.ndarray         # (n,) global cell ids, for messages
+    D: np.ndarray                # (n, n_constants) per-element constants
+    volume: np.ndarray           # (n,) rest volumes (areas in 2D)
+    dofs: np.ndarray             # (n, k * dim) global dofs, node-major
+    density: np.ndarray          # (n,) mass density of each cell
+
+    @property
+    def key(self) -> tuple:
+        return (self.element, self.law, self.quadrature)
+
+    def __len__(self) -> int:
+        return len(self.cells)
+
+
+# --------------------------------------------------------------------------- mesh and materials
+
+
+def scene_mesh(scene) -> Mesh:
+    """The scene's mesh (its cached load_mesh() when it has one), checked."""
+    if hasattr(scene, "load_mesh"):
+        mesh = scene.load_mesh()
+        check_mesh(mesh)
+        return mesh
+    return build_mesh(scene.mesh)
+
+
+def build_mesh(spec) -> Mesh:
+    """Generate or read the mesh of a MeshSpec and check it."""
+    if spec.file:
+        mesh = read_mesh(spec.file)
+    elif spec.generate in (None, "bar"):
+        dim = 2 if spec.element in ("triangle", "triangle6", "quad") or len(spec.cells) == 2 else 3
+        mesh = generate_bar(tuple(spec.size)[:dim], tuple(spec.cells)[:dim], spec.element,
+                            tuple(spec.origin)[:dim])
+    else:
+        raise TensormassError(f"mesh.generate: unknown generator {spec.generate!r} (known: bar)")
+    check_mesh(mesh)
+    return mesh
+
+
+def _box(box, dim: int, tol: float):
+    """(lo, hi) of a box given as two corners, widened by tol."""
+    try:
+        a, b = (np.asarray(c, dtype=float).reshape(-1) for c in box)
+    except (TypeError, ValueError):
+        raise TensormassError(f"a box must be two corner points, got {box!r}") from None
+    if a.size < dim or b.size < dim:
+        raise TensormassError(f"box corners need {dim} coordinates, got {box!r}")
+    a, b = a[:dim], b[:dim]
+    return np.minimum(a, b) - tol, np.maximum(a, b) + tol
+
+
+def _in_box(points: np.ndarray, box, tol: float) -> np.ndarray:
+    lo, hi = _box(box, points.shape[1], tol)
+    return np.all((points >= lo) & (points <= hi), axis=1)
+
+
+def _region_mask(block, region) -> np.ndarray:
+    """Cells of a block that a material's region selects."""
+    n = len(block)
+    if isinstance(region, str) and region.lstrip("-").isdigit():
+        region = int(region)
+    if region == "all":
+        return np.ones(n, bool)
+    if isinstance(region, (int, np.integer)) and not isinstance(region, bool):
+        return np.zeros(n, bool) if block.tags is None else block.tags == region
+    if isinstance(region, str) and region in NODES_PER_CELL:
+        return np.full(n, block.type == region)
+    raise TensormassError(f"material region {region!r}: use 'all', an element type "
+                          f"({', '.join(NODES_PER_CELL)}) or an integer cell tag")
+
+
+def _size(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 1.0
+
+
+def assign_materials(mesh: Mesh, materials) -> list:
+    """Per block, the index of the first matching material of every cell."""
+    if not materials:
+        raise TensormassError("the scene defines no material")
+    tol = _BOX_TOL * _size(mesh.points)
+    out, missing, first_missing = [], 0, []
+    offset = 0
+    for block in mesh.blocks:
+        index = np.full(len(block), -1, dtype=np.int64)
+        centroid = mesh.points[block.cells].mean(axis=1)
+        for i, mat in enumerate(materials):
+            hit = _region_mask(block, mat.region) & (index < 0)
+            if mat.box is not None:
+                hit &= _in_box(centroid, mat.box, tol)
+            index[hit] = i
+        lost = np.flatnonzero(index < 0)
+        missing += lost.size
+        first_missing.extend((offset + lost[:5]).tolist())
+        offset += len(block)
+        out.append(index)
+    if missing:
+        raise TensormassError(f"{missing} cell(s) match no material (e.g. cells {first_missing[:5]}); "
+                              "add a material with region = 'all' or widen the regions")
+    return out
+
+
+def _groups(mesh: Mesh, materials, index) -> dict:
+    """(element, law, quadrature) -> list of (block, local cell ids), in order of appearance."""
+    groups: dict = {}
+    for b, (block, idx) in enumerate(zip(mesh.blocks, index)):
+        for i in np.unique(idx):
+            mat = materials[i]
+            key = (block.type, mat.law, mat.quadrature)
+            groups.setdefault(key, []).append((b, np.flatnonzero(idx == i), int(i)))
+    return groups
+
+
+# --------------------------------------------------------------------------- the model
+
+
+class Model:
+    """Everything an integrator needs: parts with kernels and constants, masses, constraints, loads."""
+
+    def __init__(self, mesh: Mesh, materials, fixed=(), loads: Loads | None = None, probes=(),
+                 solver: Solver | None = None, output: Output | None = None, name: str = "model",
+                 check: bool = True):
+        start = time.perf_counter()
+        if check:
+            check_mesh(mesh)
+        self.mesh, self.name = mesh, name
+        self.materials = list(materials)
+        self.solver = solver if solver is not None else Solver()
+        self.output = output if output is not None else Output()
+        self.loads = loads if loads is not None else Loads()
+        self.dim, self.n_points = mesh.dim, mesh.n_points
+        self.n_dofs = self.n_points * self.dim
+        self.size = _size(mesh.points)
+        self.outputs = outputs_for(self.solver.kind)
+        self.parts = self._build_parts()
+        self.mass = self._lumped_mass()
+        self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
+        self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
+        self.f_ext = self._external_forces()
+        self.probes = {p.name: self._nearest_node(p.point) for p in probes}
+        self.scene = None
+        self.build_time = time.perf_counter() - start
+
+    @classmethod
+    def from_scene(cls, scene, mesh: Mesh | None = None) -> "Model":
+        """Build the mesh (unless given) and the model of a Scene."""
+        built = mesh is None                       # scene_mesh has checked it already
+        mesh = scene_mesh(scene) if built else mesh
+        model = cls(mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver,
+                    scene.output, scene.name, check=not built)
+        model.scene = scene
+        return model
+
+    @staticmethod
+    def required_kernels(scene, mesh: Mesh | None = None) -> set:
+        """The exact set of (element, law, quadrature, outputs) a scene needs (loads nothing)."""
+        mesh = scene_mesh(scene) if mesh is None else mesh
+        index = assign_materials(mesh, scene.materials)
+        outputs = outputs_for(scene.solver.kind)
+        return {key + (outputs,) for key in _groups(mesh, scene.materials, index)}
+
+    # -- parts ---------------------------------------------------------------------------------
+    def _build_parts(self) -> list:
+        index = assign_materials(self.mesh, self.materials)
+        offsets = np.concatenate([[0], np.cumsum([len(b) for b in self.mesh.blocks])])
+        parts = []
+        for (element, law, quad), members in _groups(self.mesh, self.materials, index).items():
+            # a module attribute lookup, so tests can spy on which kernels get loaded
+            kernel = _kernels.load_kernel(element, law, quad, backend=self.solver.backend)
+            cells = np.vstack([self.mesh.blocks[b].cells[ids] for b, ids, _ in members])
+            cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
+            params = self._parameters(law, members)
+            D = self._constants(kernel, cells, cell_ids, params)
+            stride = 1 + kernel.n_dofs
+            volume = D[:, 0:kernel.n_points * stride:stride].sum(axis=1)
+            dofs = (cells[:, :, None] * self.dim + np.arange(self.dim)).reshape(len(cells), -1)
+            rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
+            parts.append(Part(element, law, quad, kernel, cells, cell_ids, D, volume, dofs, rho))
+        return parts
+
+    def _parameters(self, law: str, members) -> dict:
+        """Native law parameters, one value per cell (materials may differ within a part)."""
+        columns: dict = {}
+        for _, ids, m in members:
+            mat = self.materials[m]
+            try:
+                values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **dict(mat.params))
+            except laws.LawError as exc:
+                raise TensormassError(f"material {m} ({law}): {exc}") from None
+            for p, v in values.items():
+                columns.setdefault(p, []).append(np.broadcast_to(v, (len(ids),)))
+        return {p: np.concatenate(v) for p, v in columns.items()}
+
+    def _constants(self, kernel, cells, cell_ids, params) -> np.ndarray:
+        try:
+            return kernel.constants(self.mesh.points[cells], **params)
+        except ElementError as exc:
+            # report global cell ids, not the part-local ones the kernel saw
+            message = str(exc).rsplit(": element(s)", 1)[0]
+            raise type(exc)(message, cell_ids[exc.elements]) from None
+
+    # -- masses, constraints, loads ------------------------------------------------------------
+    def _lumped_mass(self) -> np.ndarray:
+        """Per-dof lumped mass: density x volume split equally over each element's nodes."""
+        node_mass = np.zeros(self.n_points)
+        for part in self.parts:
+            share = part.density * part.volume / part.cells.shape[1]
+            np.add.at(node_mass, part.cells, np.broadcast_to(share[:, None], part.cells.shape))
+        if np.any(node_mass < 0):
+            raise TensormassError("negative density gives negative nodal masses")
+        return np.repeat(node_mass, self.dim)
+
+    def _nodes_in(self, box, what: str) -> np.ndarray:
+        nodes = np.flatnonzero(_in_box(self.mesh.points, box, _BOX_TOL * self.size))
+        if nodes.size == 0:
+            raise TensormassError(f"{what}: no node inside box {box!r}")
+        return nodes
+
+    def _vector(self, value, what: str) -> np.ndarray:
+        v = np.asarray(value, dtype=float).reshape(-1)
+        if v.size < self.dim or not np.all(np.isfinite(v)):
+            raise TensormassError(f"{what} must be a finite vector of {self.dim} components, got {value!r}")
+        return v[:self.dim]
+
+    def _constraints(self, fixed) -> tuple:
+        """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
+        target = np.full(self.n_dofs, np.nan)
+        for i, fx in enumerate(fixed):
+            nodes = self._nodes_in(fx.box, f"fixed[{i}]")
+            comps = np.arange(self.dim) if fx.components is None else np.asarray(fx.components, dtype=int)
+            if comps.size == 0 or comps.min() < 0 or comps.max() >= self.dim:
+                raise TensormassError(f"fixed[{i}].components must be in 0..{self.dim - 1}, got {fx.components!r}")
+            disp = (np.zeros(self.dim) if fx.displacement is None
+                    else self._vector(fx.displacement, f"fixed[{i}].displacement"))
+            target[(nodes[:, None] * self.dim + comps).ravel()] = np.tile(disp[comps], nodes.size)
+        self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
+        # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
+        used = np.zeros(self.n_points, bool)
+        for part in self.parts:
+            used[part.cells.ravel()] = True
+        orphan = (np.flatnonzero(~used)[:, None] * self.dim + np.arange(self.dim)).ravel()
+        target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
+        dofs = np.flatnonzero(~np.isnan(target))
+        return dofs, target[dofs]
+
+    def _external_forces(self) -> np.ndarray:
+        f = (self.mass.reshape(-1, self.dim) * self._vector(self.loads.gravity, "loads.gravity")).ravel()
+        for i, load in enumerate(self.loads.nodal):
+            force = self._vector(load.force, f"loads.nodal[{i}].force")
+            if load.kind == "force":
+                nodes = self._nodes_in(load.box, f"loads.nodal[{i}]")
+                f.reshape(-1, self.dim)[nodes] += force / nodes.size
+            elif load.kind == "traction":
+                self._add_traction(f.reshape(-1, self.dim), load.box, force, i)
+            else:
+                raise TensormassError(f"loads.nodal[{i}].kind must be 'force' or 'traction', got {load.kind!r}")
+        return f
+
+    def _add_traction(self, f, box, traction, i):
+        """Traction per unit area on boundary faces inside the box, area-split equally over face nodes."""
+        inside = _in_box(self.mesh.points, box, _BOX_TOL * self.size)
+        hit = False
+        for _, _, nodes in boundary_faces(self.mesh):
+            nodes = np.asarray(nodes)
+            if not inside[nodes].all():
+                continue
+            f[nodes] += traction * _face_measure(self.mesh.points, nodes, self.dim) / nodes.size
+            hit = True
+        if not hit:
+            raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
+
+    def _nearest_node(self, point) -> int:
+        p = self._vector(point, "probe point")
+        return int(np.argmin(np.sum((self.mesh.points - p) ** 2, axis=1)))
+
+    # -- helpers for the integrators ------------------------------------------------------------
+    def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
+        """(n, k, dim) nodal displacements of a part's elements from the global vector."""
+        return u.reshape(self.n_points, self.dim)[part.cells]
+
+    def warm_up(self, outputs=None) -> None:
+        """Compile (or load from numba's cache) the kernel outputs the solver will call."""
+        for part in self.parts:
+            D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dim))
+            for name in outputs or self.outputs:
+                getattr(part.kernel, name)(D, u)
+
+    def kernel_info(self) -> list:
+        return [{"element": p.element, "law": p.law, "quadrature": p.quadrature,
+                 "backend": p.kernel.backend, "outputs": list(self.outputs), "elements": len(p)}
+                for p in self.parts]
+
+    def probe_values(self, u: np.ndarray) -> dict:
+        U = u.reshape(self.n_points, self.dim)
+        return {name: U[node].tolist() for name, node in self.probes.items()}
+
+
+def _face_measure(points, nodes, dim) -> float:
+    """Area of a boundary face (length of an edge in 2D) from its corners."""
+    n = len(nodes)
+    if dim == 2:
+        a, b = points[nodes[0]], points[nodes[1]]
+        return float(np.linalg.norm(b - a))
+    corners = points[nodes[:3] if n in (3, 6) else nodes[:4]]
+    if len(corners) == 3:
+        return 0.5 * float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[2] - corners[0])))
+    return 0.5 * float(np.linalg.norm(np.cross(corners[2] - corners[0], corners[3] - corners[1])))

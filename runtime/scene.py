@@ -1,0 +1,725 @@
+"""Scenes: what to simulate, as plain data (parsed from TOML by `Scene.from_toml`).
+
+A scene file is data only: nothing in it is evaluated as code. Every key is
+validated; unknown keys, unknown laws or elements, nu >= 0.5, E <= 0 and the
+like raise SceneError naming the key (arrays of tables are indexed from 0:
+``material[1]`` is the second ``[[material]]``).
+
+    scene = Scene.from_toml("beam.toml")   # validated; the mesh is built/read and checked against it
+    mesh = scene.load_mesh()                # the same (cached) Mesh
+    which = scene.assign_materials(mesh)    # per block: index of the material of each cell
+
+Schema (every table but [mesh] and [[material]] is optional)::
+
+    name = "beam"                           # default: the file name without .toml
+    description = "..."
+    [mesh]
+    generate = "bar"                        # or: file = "organ.msh" (relative to the scene file)
+    size = [1.2, 0.2, 0.2]                  # 2 entries: a 2D mesh
+    cells = [24, 4, 4]
+    element = "hexahedron"                  # tetra tetra10 wedge pyramid mixed | 2D: quad (default) triangle triangle6 mixed
+    origin = [0.0, 0.0, 0.0]
+    [[material]]                            # first match wins
+    region = "all"                          # "all", an element type, or an integer cell tag
+    box = [[x0, y0, z0], [x1, y1, z1]]      # optional: cells whose centroid is inside (and region)
+    law = "stvk"
+    quadrature = "gauss2"
+    E = 1.0e8                               # with nu; or the law's native parameters (mu, lam, ...)
+    nu = 0.3
+    density = 800.0
+    [[fixed]]
+    box = [[...], [...]]                    # nodes inside: clamped, or
+    displacement = [0.0, 0.0, -0.01]        # prescribed (a full vector), on
+    components = [2]                        # these components only (default: all)
+    [loads]
+    gravity = [0.0, 0.0, -9.81]
+    [[loads.force]]                         # total force, split evenly over the nodes in the box
+    box = [[...], [...]]
+    value = [0.0, 0.0, -10.0]
+    [[loads.traction]]                      # force per unit area of the boundary faces in the box
+    box = [[...], [...]]
+    value = [0.0, 0.0, -100.0]
+    [solver]                                # the Solver fields below
+    [[probe]]
+    name = "tip"
+    point = [1.2, 0.1, 0.1]
+    [output]
+    dir = "out"                             # relative to the working directory
+    every = 10
+
+Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
+box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TensormassError
+
+
+class SceneError(TensormassError):
+    """A scene file that cannot be used; the message names the key."""
+
+
+@dataclass
+class MeshSpec:
+    generate: str | None = None          # "bar" (built-in generator) or None when file is given
+    file: str | None = None              # any meshio format
+    size: tuple = (1.0, 0.2, 0.2)
+    cells: tuple = (10, 2, 2)
+    element: str = "hexahedron"          # tetra, tetra10, hexahedron, wedge, pyramid, mixed, triangle, triangle6, quad
+    origin: tuple = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class Material:
+    """First match wins. region: "all", an element type name, or an integer cell tag; or box."""
+    region: str | int = "all"
+    box: tuple | None = None             # ((x0, y0, z0), (x1, y1, z1)): cells whose centroid is inside
+    law: str = "stvk"
+    quadrature: str = "gauss2"
+    E: float | None = None
+    nu: float | None = None
+    params: dict = field(default_factory=dict)   # native parameters instead of E, nu (mu=, lam=, C10=, ...)
+    density: float = 1000.0
+
+    def native_parameters(self) -> dict:
+        """The law's native parameters as floats (from E, nu or as given)."""
+        from .. import laws
+        law = laws.get(self.law)
+        native = law.native_parameters(self.E, self.nu, **self.params)
+        return {k: float(v) for k, v in native.items()}
+
+
+@dataclass
+class Fixed:
+    box: tuple                            # nodes inside are constrained
+    displacement: tuple | None = None     # None: clamped (zero); else prescribed displacement vector
+    components: tuple | None = None       # which components (0, 1, 2) are constrained; None = all
+
+
+@dataclass
+class NodalLoad:
+    box: tuple                            # force applied to the nodes inside the box
+    force: tuple                          # total force, split evenly over those nodes
+    kind: str = "force"                   # "force" (total, split over nodes) or "traction" (per unit area of boundary faces inside the box)
+
+
+@dataclass
+class Loads:
+    gravity: tuple = (0.0, 0.0, 0.0)
+    nodal: list = field(default_factory=list)    # [NodalLoad]
+
+
+@dataclass
+class Solver:
+    kind: str = "static"                  # static | implicit_euler | backward_euler | explicit
+    dt: float = 0.01
+    steps: int = 1                        # time steps (dynamic) or load steps (static)
+    linear: str = "auto"                  # auto | direct | cg
+    cg_tolerance: float = 1e-8
+    cg_max_iterations: int = 1000
+    newton_tolerance: float = 1e-8        # relative residual
+    newton_max_iterations: int = 25
+    rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)
+    project_psd: bool | None = None       # None: on for non-convex laws
+    backend: str = "numba"                # kernel backend: numba | c
+
+
+@dataclass
+class Probe:
+    name: str
+    point: tuple
+
+
+@dataclass
+class Output:
+    dir: str | None = None                # None: no files written
+    every: int = 1
+
+
+@dataclass
+class Scene:
+    mesh: MeshSpec
+    materials: list                       # [Material]
+    fixed: list = field(default_factory=list)     # [Fixed]
+    loads: Loads = field(default_factory=Loads)
+    solver: Solver = field(default_factory=Solver)
+    probes: list = field(default_factory=list)    # [Probe]
+    output: Output = field(default_factory=Output)
+    name: str = "scene"
+    description: str = ""
+    source: str | None = None             # the scene file, when read from one
+
+    # -- reading ------------------------------------------------------------------------------
+    @classmethod
+    def from_toml(cls, path, load_mesh: bool = True) -> "Scene":
+        """Read and validate a scene file; relative mesh paths are relative to its folder."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise SceneError(f"scene file not found: {path}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SceneError(f"cannot read scene file {path}: {exc}") from None
+        scene = cls.from_string(text, base_dir=path.parent, name=path.stem, source=str(path),
+                                load_mesh=load_mesh)
+        return scene
+
+    @classmethod
+    def from_string(cls, text: str, base_dir=None, name: str = "scene", source: str | None = None,
+                    load_mesh: bool = True) -> "Scene":
+        """Parse TOML text (syntax errors are reported with their line) and validate it."""
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            where = source or "scene"
+            raise SceneError(f"{where}: invalid TOML: {exc}") from None
+        data = dict(data)
+        data.setdefault("name", name)
+        scene = cls.from_dict(data, base_dir=base_dir, load_mesh=load_mesh)
+        scene.source = source
+        return scene
+
+    @classmethod
+    def from_dict(cls, data, base_dir=None, load_mesh: bool = True) -> "Scene":
+        """Validate a scene given as plain data (what tomllib returns).
+
+        With load_mesh (the default) the mesh is generated or read here, so that
+        everything that depends on it (element x law x quadrature combinations,
+        cells without a material, boxes that hold no node, vector sizes of file
+        meshes) is checked before anything runs; see load_mesh() and validate().
+        """
+        return _Parser(base_dir).scene(data, load_mesh)
+
+    # -- the mesh -------------------------------------------------------------------------------
+    @property
+    def dim(self) -> int | None:
+        """2 or 3; None for a file mesh that has not been read yet."""
+        mesh = getattr(self, "_mesh", None)
+        if mesh is not None:
+            return mesh.dim
+        if self.mesh.file is None:
+            return len(self.mesh.size)
+        return None
+
+    def load_mesh(self):
+        """The mesh (generated or read once, then cached); MeshError-based problems become SceneError."""
+        mesh = getattr(self, "_mesh", None)
+        if mesh is None:
+            from .mesh import MeshError, generate_bar, read_mesh
+            try:
+                if self.mesh.file is not None:
+                    mesh = read_mesh(self.mesh.file)
+                else:
+                    mesh = generate_bar(self.mesh.size, self.mesh.cells, self.mesh.element, self.mesh.origin)
+            except MeshError as exc:
+                key = "mesh.file" if self.mesh.file is not None else "mesh"
+                raise SceneError(f"{key}: {exc}") from None
+            self._mesh = mesh
+        return mesh
+
+    def assign_materials(self, mesh=None) -> list:
+        """Per cell block, the index into self.materials of each cell (-1: no material matches)."""
+        mesh = self.load_mesh() if mesh is None else mesh
+        tol = box_tolerance(mesh.points)
+        out = []
+        for blk in mesh.blocks:
+            which = np.full(len(blk), -1, dtype=np.int64)
+            centroids = mesh.points[blk.cells].mean(axis=1) if len(blk) else np.zeros((0, mesh.dim))
+            for i, mat in enumerate(self.materials):
+                if isinstance(mat.region, str) and mat.region not in ("all", blk.type):
+                    continue
+                hit = np.ones(len(blk), dtype=bool)
+                if not isinstance(mat.region, str):
+                    if blk.tags is None:
+                        continue
+                    hit &= blk.tags == int(mat.region)
+                if mat.box is not None:
+                    hit &= box_contains(mat.box, centroids, tol)
+                which[(which < 0) & hit] = i
+            out.append(which)
+        return out
+
+    def validate(self, mesh=None) -> None:
+        """Checks that need the mesh (run by from_dict unless load_mesh=False)."""
+        mesh = self.load_mesh() if mesh is None else mesh
+        _check_against_mesh(self, mesh)
+
+    # -- writing --------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Plain data (for summaries); not guaranteed to round-trip through from_dict."""
+        return asdict(self)
+
+
+# ============================================================================== box helpers
+
+
+def box_tolerance(points) -> float:
+    """Slack for box tests: 1e-8 of the bounding-box diagonal (as runtime.model uses)."""
+    points = np.asarray(points, dtype=float)
+    if points.size == 0:
+        return 0.0
+    return 1e-8 * float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def box_contains(box, points, tol: float = 0.0) -> np.ndarray:
+    """Boolean mask of the points (n, dim) inside the closed box ((lo...), (hi...)), +- tol."""
+    points = np.asarray(points, dtype=float)
+    lo = np.asarray(box[0], dtype=float)
+    hi = np.asarray(box[1], dtype=float)
+    return np.all((points >= lo - tol) & (points <= hi + tol), axis=1)
+
+
+# ============================================================================== parsing
+
+_TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output")
+_MESH = ("generate", "file", "size", "cells", "element", "origin")
+_MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
+_FIXED = ("box", "displacement", "components")
+_LOADS = ("gravity", "force", "traction")
+_LOAD = ("box", "value")
+_SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
+           "newton_max_iterations", "rayleigh", "project_psd", "backend")
+_PROBE = ("name", "point")
+_OUTPUT = ("dir", "every")
+
+SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
+LINEAR_SOLVERS = ("auto", "direct", "cg")
+BACKENDS = ("numba", "c")
+GENERATORS = ("bar",)
+ELEMENTS_3D = ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed")
+ELEMENTS_2D = ("triangle", "triangle6", "quad", "mixed")
+CELL_TYPES = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
+
+
+def _type_name(value) -> str:
+    return {bool: "boolean", int: "integer", float: "float", str: "string", list: "array",
+            dict: "table"}.get(type(value), type(value).__name__)
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+class _Parser:
+    def __init__(self, base_dir):
+        self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
+        self.dim = None             # 2 or 3 once known
+
+    # -- primitives -------------------------------------------------------------------------
+    @staticmethod
+    def table(value, key) -> dict:
+        if not isinstance(value, dict):
+            raise SceneError(f"{key}: expected a table, got {_type_name(value)}")
+        return value
+
+    @staticmethod
+    def tables(value, key) -> list:
+        """An array of tables; a single table is accepted as a one-element array."""
+        if isinstance(value, dict):
+            return [value]
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise SceneError(f"{key}: expected an array of tables ([[{key}]]), got {_type_name(value)}")
+        return value
+
+    @staticmethod
+    def keys(table, key, allowed, extra=()):
+        unknown = [k for k in table if k not in allowed and k not in extra]
+        if unknown:
+            listed = ", ".join(tuple(allowed) + tuple(extra))
+            if key:
+                where = "[" + key.split("[")[0] + "]"
+                raise SceneError(f"{key}.{unknown[0]}: unknown key; allowed keys in {where}: {listed}")
+            raise SceneError(f"{unknown[0]}: unknown table or key; allowed: {listed}")
+
+    @staticmethod
+    def number(value, key, *, positive=False, min_value=None, allow_inf=False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{key}: expected a number, got {_type_name(value)} {_fmt(value)}")
+        value = float(value)
+        if math.isnan(value) or (math.isinf(value) and not allow_inf):
+            raise SceneError(f"{key}: must be a finite number (got {_fmt(value)})")
+        if positive and not value > 0:
+            raise SceneError(f"{key}: must be > 0 (got {_fmt(value)})")
+        if min_value is not None and value < min_value:
+            raise SceneError(f"{key}: must be >= {_fmt(min_value)} (got {_fmt(value)})")
+        return value
+
+    @staticmethod
+    def integer(value, key, min_value=None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneError(f"{key}: expected an integer, got {_type_name(value)} {_fmt(value)}")
+        if min_value is not None and value < min_value:
+            raise SceneError(f"{key}: must be >= {min_value} (got {value})")
+        return int(value)
+
+    @staticmethod
+    def string(value, key, choices=None) -> str:
+        if not isinstance(value, str):
+            raise SceneError(f"{key}: expected a string, got {_type_name(value)} {_fmt(value)}")
+        if choices is not None and value not in choices:
+            raise SceneError(f"{key}: unknown value {value!r}; allowed: {', '.join(choices)}")
+        return value
+
+    @staticmethod
+    def boolean(value, key) -> bool:
+        if not isinstance(value, bool):
+            raise SceneError(f"{key}: expected true or false, got {_type_name(value)} {_fmt(value)}")
+        return value
+
+    def vector(self, value, key, dim=None, allow_inf=False) -> tuple:
+        """A list of numbers with the scene's dimension (2 or 3 while it is not known yet)."""
+        dim = dim if dim is not None else self.dim
+        if not isinstance(value, list):
+            raise SceneError(f"{key}: expected an array of {dim or '2 or 3'} numbers, got {_type_name(value)}")
+        if (dim is not None and len(value) != dim) or (dim is None and len(value) not in (2, 3)):
+            what = f"{dim}" if dim is not None else "2 or 3"
+            extra = " (the mesh is 2D: use 2 components)" if dim == 2 else (
+                " (the mesh is 3D: use 3 components)" if dim == 3 else "")
+            raise SceneError(f"{key}: expected {what} components, got {len(value)}{extra}")
+        return tuple(self.number(v, f"{key}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value))
+
+    def box(self, value, key) -> tuple:
+        if not isinstance(value, list) or len(value) != 2:
+            raise SceneError(f"{key}: expected [[min...], [max...]] (two corner points), got {_fmt(value)}")
+        lo = self.vector(value[0], f"{key}[0]", allow_inf=True)
+        hi = self.vector(value[1], f"{key}[1]", dim=len(lo), allow_inf=True)
+        bad = [i for i in range(len(lo)) if lo[i] > hi[i]]
+        if bad:
+            i = bad[0]
+            raise SceneError(f"{key}: min > max in component {i} ({_fmt(lo[i])} > {_fmt(hi[i])}); "
+                             "write box = [[min...], [max...]]")
+        return (lo, hi)
+
+    # -- tables -----------------------------------------------------------------------------
+    def scene(self, data, load_mesh) -> Scene:
+        data = self.table(data, "scene")
+        self.keys(data, "", _TOP)
+        if "mesh" not in data:
+            raise SceneError("mesh: missing [mesh] table (generate = \"bar\" or file = \"...\")")
+        if "material" not in data or not data["material"]:
+            raise SceneError("material: no [[material]] given (at least one, e.g. region = \"all\")")
+        mesh = self.mesh(self.table(data["mesh"], "mesh"))
+        materials = [self.material(t, f"material[{i}]")
+                     for i, t in enumerate(self.tables(data["material"], "material"))]
+        fixed = [self.fixed(t, f"fixed[{i}]") for i, t in enumerate(self.tables(data.get("fixed", []), "fixed"))]
+        loads = self.loads(self.table(data.get("loads", {}), "loads"))
+        solver = self.solver(self.table(data.get("solver", {}), "solver"))
+        probes = [self.probe(t, f"probe[{i}]", i) for i, t in enumerate(self.tables(data.get("probe", []), "probe"))]
+        names = [p.name for p in probes]
+        dup = next((n for n in names if names.count(n) > 1), None)
+        if dup is not None:
+            raise SceneError(f"probe[{names.index(dup, names.index(dup) + 1)}].name: duplicate probe name {dup!r}")
+        output = self.output(self.table(data.get("output", {}), "output"))
+        name = self.string(data.get("name", "scene"), "name")
+        description = self.string(data.get("description", ""), "description")
+        if solver.kind == "static" and not fixed:
+            raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
+                             "(without constraints the stiffness matrix is singular)")
+        scene = Scene(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver,
+                      probes=probes, output=output, name=name, description=description)
+        if load_mesh:
+            scene.validate(scene.load_mesh())
+        return scene
+
+    def mesh(self, t) -> MeshSpec:
+        self.keys(t, "mesh", _MESH)
+        if ("generate" in t) == ("file" in t):
+            raise SceneError("mesh: give exactly one of generate = \"bar\" or file = \"...\"")
+        if "file" in t:
+            extra = [k for k in ("size", "cells", "element", "origin") if k in t]
+            if extra:
+                raise SceneError(f"mesh.{extra[0]}: only used with generate = \"bar\", not with mesh.file")
+            raw = self.string(t["file"], "mesh.file")
+            path = Path(raw).expanduser()
+            if not path.is_absolute():
+                path = self.base_dir / path
+            if not path.is_file():
+                raise SceneError(f"mesh.file: mesh file not found: {path} (relative paths are relative to "
+                                 "the scene file)")
+            return MeshSpec(generate=None, file=str(path))
+        self.string(t["generate"], "mesh.generate", GENERATORS)
+        element = self.string(t["element"], "mesh.element", tuple(dict.fromkeys(ELEMENTS_3D + ELEMENTS_2D))) \
+            if "element" in t else None
+        if "size" in t:
+            size = self.vector(t["size"], "mesh.size")
+        else:
+            size = (1.0, 0.2) if element in ("triangle", "triangle6", "quad") else (1.0, 0.2, 0.2)
+        self.dim = len(size)
+        if element is None:                 # default: hexahedron, or quad for a 2D size
+            element = "hexahedron" if self.dim == 3 else "quad"
+        for i, s in enumerate(size):
+            if s <= 0:
+                raise SceneError(f"mesh.size[{i}]: must be > 0 (got {_fmt(s)})")
+        allowed = ELEMENTS_3D if self.dim == 3 else ELEMENTS_2D
+        if element not in allowed:
+            raise SceneError(f"mesh.element: {element!r} is not a {self.dim}D element; for a {self.dim}D "
+                             f"mesh (size has {self.dim} entries) use: {', '.join(allowed)}")
+        if "cells" in t:
+            cells_raw = t["cells"]
+            if not isinstance(cells_raw, list) or len(cells_raw) != self.dim:
+                raise SceneError(f"mesh.cells: expected {self.dim} integers (one per entry of mesh.size), "
+                                 f"got {_fmt(cells_raw)}")
+            cells = tuple(self.integer(c, f"mesh.cells[{i}]", 1) for i, c in enumerate(cells_raw))
+        else:
+            cells = (10, 2, 2)[: self.dim]
+        if element == "mixed" and cells[0] < (4 if self.dim == 3 else 2):
+            raise SceneError(f"mesh.cells[0]: element = \"mixed\" needs at least {4 if self.dim == 3 else 2} "
+                             f"cells along x (got {cells[0]})")
+        origin = self.vector(t["origin"], "mesh.origin") if "origin" in t else (0.0,) * self.dim
+        return MeshSpec(generate="bar", file=None, size=size, cells=cells, element=element, origin=origin)
+
+    def material(self, t, key) -> Material:
+        from .. import laws
+        t = self.table(t, key)
+        law_name = self.string(t.get("law", "stvk"), f"{key}.law")
+        try:
+            law = laws.get(law_name)
+        except laws.LawError as exc:
+            raise SceneError(f"{key}.law: {exc}") from None
+        self.keys(t, key, _MATERIAL, law.parameters)
+        region = t.get("region", "all")
+        if isinstance(region, bool) or not isinstance(region, (str, int)):
+            raise SceneError(f"{key}.region: expected \"all\", an element type or an integer cell tag, "
+                             f"got {_type_name(region)}")
+        if isinstance(region, str) and region not in ("all",) + CELL_TYPES:
+            raise SceneError(f"{key}.region: unknown region {region!r}; use \"all\", an element type "
+                             f"({', '.join(CELL_TYPES)}), an integer cell tag, or box = [[...], [...]]")
+        box = self.box(t["box"], f"{key}.box") if "box" in t else None
+        quadrature = self.string(t.get("quadrature", "gauss2"), f"{key}.quadrature")
+        self._check_combination(key, region, law_name, quadrature)
+        density = self.number(t.get("density", 1000.0), f"{key}.density")
+        if density <= 0:
+            raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
+        native = {p: self.number(t[p], f"{key}.{p}") for p in law.parameters if p in t}
+        E = nu = None
+        if native and ("E" in t or "nu" in t):
+            raise SceneError(f"{key}: give either E and nu or the native parameters of law {law_name!r} "
+                             f"({', '.join(law.parameters)}), not both")
+        if native:
+            missing = [p for p in law.parameters if p not in native]
+            if missing:
+                raise SceneError(f"{key}.{missing[0]}: missing; law {law_name!r} takes "
+                                 f"{', '.join(law.parameters)} (or E and nu)")
+            _check_native(key, law_name, native, self.dim)
+        else:
+            if "E" not in t and "nu" not in t:
+                raise SceneError(f"{key}: needs E and nu, or the native parameters of law {law_name!r} "
+                                 f"({', '.join(law.parameters)})")
+            if "E" not in t or "nu" not in t:
+                missing = "E" if "E" not in t else "nu"
+                raise SceneError(f"{key}.{missing}: missing (E and nu go together)")
+            E = self.number(t["E"], f"{key}.E")
+            nu = self.number(t["nu"], f"{key}.nu")
+            if E <= 0:
+                raise SceneError(f"{key}.E: Young's modulus must be > 0 (got {_fmt(E)})")
+            if nu >= 0.5:
+                raise SceneError(f"{key}.nu: Poisson's ratio must be < 0.5 (got {_fmt(nu)}); nu = 0.5 is "
+                                 "incompressible, which these displacement elements cannot represent")
+            if nu <= -1.0:
+                raise SceneError(f"{key}.nu: Poisson's ratio must be > -1 (got {_fmt(nu)})")
+        mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
+                       params=native, density=density)
+        try:
+            values = mat.native_parameters()
+        except laws.LawError as exc:
+            raise SceneError(f"{key}: {exc}") from None
+        bad = [p for p, v in values.items() if not math.isfinite(v)]
+        if bad:
+            raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
+        return mat
+
+    @staticmethod
+    def _check_combination(key, region, law, quadrature):
+        """Early check of (element, law, quadrature); validate() repeats it per cell type of the mesh."""
+        from ..generator.catalogue import entries
+        if isinstance(region, str) and region != "all":
+            _catalogue_check(f"{key}.quadrature", region, law, quadrature)
+            return
+        try:
+            entries(law_names=[law], quadrature_names=[quadrature])
+        except ValueError as exc:
+            raise SceneError(f"{key}.quadrature: {exc}") from None
+
+    def fixed(self, t, key) -> Fixed:
+        t = self.table(t, key)
+        self.keys(t, key, _FIXED)
+        if "box" not in t:
+            raise SceneError(f"{key}.box: missing (nodes inside the box are constrained)")
+        box = self.box(t["box"], f"{key}.box")
+        disp = self.vector(t["displacement"], f"{key}.displacement", dim=len(box[0])) if "displacement" in t else None
+        comps = None
+        if "components" in t:
+            raw = t["components"]
+            if not isinstance(raw, list) or not raw:
+                raise SceneError(f"{key}.components: expected a non-empty array of component indices")
+            dim = len(box[0])
+            comps = tuple(self.integer(c, f"{key}.components[{i}]", 0) for i, c in enumerate(raw))
+            if max(comps) >= dim:
+                raise SceneError(f"{key}.components: component {max(comps)} does not exist in {dim}D "
+                                 f"(use 0..{dim - 1})")
+            if len(set(comps)) != len(comps):
+                raise SceneError(f"{key}.components: repeated component in {list(comps)}")
+        return Fixed(box=box, displacement=disp, components=comps)
+
+    def loads(self, t) -> Loads:
+        self.keys(t, "loads", _LOADS)
+        gravity = self.vector(t["gravity"], "loads.gravity") if "gravity" in t else None
+        nodal = []
+        for kind in ("force", "traction"):
+            for i, lt in enumerate(self.tables(t.get(kind, []), f"loads.{kind}")):
+                key = f"loads.{kind}[{i}]"
+                self.keys(lt, key, _LOAD)
+                for k in _LOAD:
+                    if k not in lt:
+                        raise SceneError(f"{key}.{k}: missing")
+                box = self.box(lt["box"], f"{key}.box")
+                value = self.vector(lt["value"], f"{key}.value", dim=len(box[0]))
+                nodal.append(NodalLoad(box=box, force=value, kind=kind))
+        if gravity is None:
+            gravity = (0.0,) * (self.dim or 3)
+        return Loads(gravity=gravity, nodal=nodal)
+
+    def solver(self, t) -> Solver:
+        self.keys(t, "solver", _SOLVER)
+        s = Solver()
+        if "kind" in t:
+            s.kind = self.string(t["kind"], "solver.kind", SOLVER_KINDS)
+        if "dt" in t:
+            s.dt = self.number(t["dt"], "solver.dt", positive=True)
+        if "steps" in t:
+            s.steps = self.integer(t["steps"], "solver.steps", 1)
+        if "linear" in t:
+            s.linear = self.string(t["linear"], "solver.linear", LINEAR_SOLVERS)
+        for k in ("cg_tolerance", "newton_tolerance"):
+            if k in t:
+                setattr(s, k, self.number(t[k], f"solver.{k}", positive=True))
+        for k in ("cg_max_iterations", "newton_max_iterations"):
+            if k in t:
+                setattr(s, k, self.integer(t[k], f"solver.{k}", 1))
+        if "rayleigh" in t:
+            raw = t["rayleigh"]
+            if not isinstance(raw, list) or len(raw) != 2:
+                raise SceneError(f"solver.rayleigh: expected [alpha, beta] (2 numbers), got {_fmt(raw)}")
+            s.rayleigh = tuple(self.number(v, f"solver.rayleigh[{i}]", min_value=0.0) for i, v in enumerate(raw))
+        if "project_psd" in t:
+            s.project_psd = self.boolean(t["project_psd"], "solver.project_psd")
+        if "backend" in t:
+            s.backend = self.string(t["backend"], "solver.backend", BACKENDS)
+        return s
+
+    def probe(self, t, key, index) -> Probe:
+        t = self.table(t, key)
+        self.keys(t, key, _PROBE)
+        if "point" not in t:
+            raise SceneError(f"{key}.point: missing")
+        name = self.string(t.get("name", f"probe{index}"), f"{key}.name")
+        if not name:
+            raise SceneError(f"{key}.name: must not be empty")
+        return Probe(name=name, point=self.vector(t["point"], f"{key}.point"))
+
+    def output(self, t) -> Output:
+        self.keys(t, "output", _OUTPUT)
+        out = Output()
+        if "dir" in t:
+            out.dir = self.string(t["dir"], "output.dir")
+            if not out.dir.strip():
+                raise SceneError("output.dir: must not be empty (leave it out for no output)")
+        if "every" in t:
+            out.every = self.integer(t["every"], "output.every", 1)
+        return out
+
+
+def _catalogue_check(key, element, law, quadrature):
+    """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
+    from ..generator.catalogue import entries, quadratures
+    try:
+        entries(elements=[element], law_names=[law], quadrature_names=[quadrature])
+    except ValueError:
+        try:
+            available = ", ".join(quadratures(element, law))
+        except Exception:  # noqa: BLE001 - only for the message
+            available = "?"
+        raise SceneError(f"{key}: quadrature {quadrature!r} is not available for {element} with law "
+                         f"{law!r}; available: {available}") from None
+
+
+def _check_native(key, law, native, dim):
+    """Plausibility of native parameters whose meaning we know; finiteness is checked for all."""
+    mu = native.get("mu")
+    if mu is not None and mu <= 0:
+        raise SceneError(f"{key}.mu: shear modulus must be > 0 (got {_fmt(mu)})")
+    lam = native.get("lam")
+    if lam is not None and mu is not None:
+        # positive bulk modulus <=> -1 < nu < 0.5 (3D); plane strain needs lam + mu > 0
+        if (dim == 2 and lam + mu <= 0) or (dim != 2 and 3 * lam + 2 * mu <= 0):
+            raise SceneError(f"{key}.lam: lam = {_fmt(lam)} with mu = {_fmt(mu)} gives a non-positive "
+                             "bulk modulus (Poisson's ratio outside (-1, 0.5))")
+    kappa = native.get("kappa")
+    if kappa is not None and kappa <= 0:
+        raise SceneError(f"{key}.kappa: bulk modulus must be > 0 (got {_fmt(kappa)})")
+    if "C10" in native and "C01" in native and native["C10"] + native["C01"] <= 0:
+        raise SceneError(f"{key}.C10: C10 + C01 must be > 0 (got {_fmt(native['C10'] + native['C01'])})")
+
+
+def _check_against_mesh(scene: Scene, mesh) -> None:
+    dim = mesh.dim
+
+    def vec(value, key):
+        if value is not None and len(value) != dim:
+            raise SceneError(f"{key}: expected {dim} components, got {len(value)} (the mesh is {dim}D)")
+
+    # vectors of file meshes could not be checked while parsing
+    g = scene.loads.gravity
+    if len(g) != dim:
+        if not any(g) and scene.mesh.file is not None:
+            scene.loads.gravity = (0.0,) * dim
+        else:
+            vec(g, "loads.gravity")
+    tol = box_tolerance(mesh.points)
+    lo, hi = (mesh.points.min(axis=0), mesh.points.max(axis=0)) if mesh.n_points else (None, None)
+    bounds = "" if lo is None else (f" (mesh bounds [{', '.join(f'{v:g}' for v in lo)}] .. "
+                                    f"[{', '.join(f'{v:g}' for v in hi)}])")
+    for i, m in enumerate(scene.materials):
+        if m.box is not None:
+            vec(m.box[0], f"material[{i}].box")
+    for i, f in enumerate(scene.fixed):
+        vec(f.box[0], f"fixed[{i}].box")
+        vec(f.displacement, f"fixed[{i}].displacement")
+        if f.components is not None and max(f.components) >= dim:
+            raise SceneError(f"fixed[{i}].components: component {max(f.components)} does not exist in {dim}D")
+        if not box_contains(f.box, mesh.points, tol).any():
+            raise SceneError(f"fixed[{i}].box: no mesh node inside{bounds}")
+    counters = {"force": 0, "traction": 0}
+    for load in scene.loads.nodal:
+        key = f"loads.{load.kind}[{counters[load.kind]}]"
+        counters[load.kind] += 1
+        vec(load.box[0], f"{key}.box")
+        vec(load.force, f"{key}.value")
+        if not box_contains(load.box, mesh.points, tol).any():
+            raise SceneError(f"{key}.box: no mesh node inside{bounds}")
+    for i, p in enumerate(scene.probes):
+        vec(p.point, f"probe[{i}].point")
+
+    # every cell needs a material, and every (cell type, law, quadrature) in use must exist
+    which = scene.assign_materials(mesh)
+    offset = 0
+    for blk, w in zip(mesh.blocks, which):
+        orphans = np.flatnonzero(w < 0)
+        if orphans.size:
+            ids = ", ".join(str(int(offset + c)) for c in orphans[:8]) + (", ..." if orphans.size > 8 else "")
+            tag = "" if blk.tags is None else f" (tag {int(blk.tags[orphans[0]])})"
+            raise SceneError(f"material: {orphans.size} {blk.type} cell(s){tag} match no [[material]]: "
+                             f"cells [{ids}]; add a last [[material]] with region = \"all\"")
+        for i in np.unique(w):
+            m = scene.materials[int(i)]
+            _catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
+        offset += len(blk)
