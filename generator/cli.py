@@ -3,6 +3,8 @@
     tensormass list                               the catalogue, with op and constant counts
     tensormass generate --element tetra --law stvk --quadrature gauss1 --backend numba --out DIR
     tensormass generate --check                   regenerate the catalogue and diff it with generated/
+    tensormass run SCENE.toml [--json SUMMARY]    simulate a scene
+    tensormass demo                               the embedded default scene (a mixed bar under gravity)
 
 Bad input exits with code 2 and a message naming the problem.
 """
@@ -145,6 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--check", action="store_true", help="regenerate into a temporary folder and diff with generated/")
     p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
     p.set_defaults(run=cmd_generate)
+
+    from ..runtime.commands import add_commands
+    add_commands(sub)                      # run, demo
     return parser
 
 

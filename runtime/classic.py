@@ -252,7 +252,7 @@ def _forces(G, v, mat, u, f, flags, law):
 
 @njit(inline="always", **_JIT)
 def _forces_and_stiffness(G, v, mat, u, f, K, flags, law):
-    """f as classic_forces and K (n, N*3, N*3) = d2W/du2."""
+    """f as _forces and K (n, N*3, N*3) = d2W/du2."""
     n_elem, n_points, n_nodes = G.shape[0], G.shape[1], G.shape[2]
     n_dofs = 3 * n_nodes
     F = np.empty((3, 3))
