@@ -5,6 +5,7 @@
     tensormass generate --check                   regenerate the catalogue and diff it with generated/
     tensormass run SCENE.toml [--json SUMMARY]    simulate a scene
     tensormass demo                               the embedded default scene (a mixed bar under gravity)
+    tensormass bench kernels|compile [--json F]   kernel throughput against a classic loop; compile budget
 
 Bad input exits with code 2 and a message naming the problem.
 """
@@ -148,8 +149,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
     p.set_defaults(run=cmd_generate)
 
+    from ..runtime.bench import add_bench_command
     from ..runtime.commands import add_commands
     add_commands(sub)                      # run, demo
+    add_bench_command(sub)                 # bench kernels, bench compile
     return parser
 
 

@@ -3,7 +3,8 @@
 Two sources, both computed once by the generated ``constants`` kernel (the
 thesis' Algorithm 3: the per-step code then reads only D and u):
 - rest geometry at each integration point: v = w det J and the physical shape
-  gradients G_i = J^-T grad_xi N_i (J = dX/dxi of the rest configuration);
+  gradients G_i = J^-T grad_xi N_i (J = dX/dxi of the rest configuration),
+  computed from a table of reference shape gradients at the points;
 - subexpressions of the law code that involve only material parameters
   (lam/2, 2 mu, alpha of stable neo-Hookean, ...), found by ``hoist``.
 """
@@ -17,27 +18,23 @@ def rest_symbols(n_nodes: int, dim: int) -> sp.Matrix:
     return sp.Matrix(n_nodes, dim, lambda i, k: sp.Symbol(f"X{i}_{k}", real=True))
 
 
-def point_geometry(dN: sp.Matrix, weight, X: sp.Matrix, q: int):
-    """Straight-line code for the rest geometry at one point.
+def geometry_code(dim: int):
+    """Straight-line code for the rest geometry at one integration point, shared by all points.
 
-    dN (n x dim) holds the reference shape gradients evaluated at the point.
-    Returns (temporaries, outputs): J = dX/dxi, its determinant and inverse go
-    through named temporaries, so the code is the same small shape at every
-    point (no symbolic inverse of a 3x3 matrix of sums to simplify).
-    Outputs: v = w det J, then G_i_b = (dN J^-1)_ib, then detJ.
+    The template accumulates J[a][k] = sum_i X_ia dN_ik from a table of shape
+    gradients dN (one row per point: rule-dependent numbers are data, not code,
+    which keeps gauss3 kernels small and quick to compile). This code then
+    forms det J and J^-1, and G_i = dN_i J^-1 for one node with gradient dn.
+    Returns (temporaries, [(b, G_b expression)]).
     """
-    n, dim = dN.shape
-    J = X.T * dN                                   # J[a, k] = sum_i X_ia dN_ik
-    Js = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"J{q}_{a}{k}", real=True))
-    detJ = sp.Symbol(f"detJ{q}", real=True)
-    inv = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"Ji{q}_{a}{k}", real=True))
-    adj = Js.adjugate()
-    temps = [(Js[a, k], J[a, k]) for a in range(dim) for k in range(dim)]
-    temps.append((detJ, Js.det()))
-    temps += [(inv[a, k], adj[a, k] / detJ) for a in range(dim) for k in range(dim)]
-    G = dN * inv                                   # G[i, b] = sum_k dN_ik Jinv[k, b]
-    outputs = [("v", weight * detJ)] + [(f"G_{i}_{b}", G[i, b]) for i in range(n) for b in range(dim)]
-    return temps, outputs + [("detJ", detJ)]
+    J = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"J{a}{k}", real=True))
+    detJ = sp.Symbol("detJ", real=True)
+    inv = sp.Matrix(dim, dim, lambda a, k: sp.Symbol(f"Ji{a}{k}", real=True))
+    adj = J.adjugate()
+    temps = [(detJ, J.det())] + [(inv[a, k], adj[a, k] / detJ) for a in range(dim) for k in range(dim)]
+    dn = [sp.Symbol(f"dn{k}", real=True) for k in range(dim)]
+    G = [(b, sum(dn[k] * inv[k, b] for k in range(dim))) for b in range(dim)]
+    return temps, G
 
 
 def hoist(exprs: list[sp.Expr], rest: set[sp.Symbol], prefix: str = "c"):

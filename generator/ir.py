@@ -8,7 +8,6 @@ so that the per-step code reads D and u only.
 from __future__ import annotations
 
 import hashlib
-from fractions import Fraction
 import inspect
 from dataclasses import dataclass, field
 
@@ -16,7 +15,7 @@ import sympy as sp
 
 from .. import laws as laws_pkg
 from . import GENERATOR_VERSION
-from .constants import hoist, point_geometry, rest_symbols
+from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, eliminate, split
@@ -41,7 +40,10 @@ class KernelIR:
     material_offset: int
     material_names: tuple        # material constants stored after the geometry
     constant_names: tuple        # names of every column of D
-    geometry: tuple              # one Fragment per point: outputs v, G_i_b (in D order), detJ
+    geometry: Fragment           # det J and J^-1 from J (same code at every point)
+    geometry_G: tuple            # ((b, G_b from dn and J^-1), ...) for one node
+    dN_table: tuple              # [point][node][k] reference shape gradients at the points
+    weights: tuple               # quadrature weights
     material: Fragment           # material constants from the parameters
     law_code: dict               # variant -> list[Fragment]: energy, gradient, tangent, gradient_tangent
     J: sp.Expr | None            # det F from the F symbols, for the inversion check
@@ -102,7 +104,8 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     dim, n = ref.dim, ref.n_nodes
     deriv = law_derivatives(law, dim)
 
-    geometry, names = _geometry(ref, rule)
+    dN_table, names = _shape_gradient_table(ref, rule)
+    geo_temps, geo_G = geometry_code(dim)
     law_code, material, J = _law_code(deriv, law, max_ops)
     stride = 1 + n * dim
     material_names = tuple(name for name, _ in material.outputs)
@@ -117,7 +120,10 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         material_offset=stride * rule.n_points,
         material_names=material_names,
         constant_names=tuple(names) + material_names,
-        geometry=geometry,
+        geometry=Fragment(tuple(geo_temps), ()),
+        geometry_G=tuple(geo_G),
+        dN_table=dN_table,
+        weights=tuple(float(sp.N(w, 30)) for w in rule.weights),
         material=material,
         law_code=law_code,
         J=J,
@@ -130,33 +136,15 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     return ir
 
 
-def _geometry(ref, rule):
-    X = rest_symbols(ref.n_nodes, ref.dim)
+def _shape_gradient_table(ref, rule):
+    """dN_i/dxi_k at every point as floats, and the names of the D columns they lead to."""
     dN_symbolic = ref.gradients()
-    fragments, names = [], []
-    for q, (point, weight) in enumerate(zip(rule.points, rule.weights)):
-        at = dict(zip(ref.xi, point))
-        dN = dN_symbolic.subs(at).applyfunc(numeric)
-        temps, outputs = point_geometry(dN, numeric(weight), X, q)
+    table, names = [], []
+    for q, point in enumerate(rule.points):
+        dN = dN_symbolic.subs(dict(zip(ref.xi, point)))
+        table.append(tuple(tuple(float(sp.N(dN[i, k], 30)) for k in range(ref.dim)) for i in range(ref.n_nodes)))
         names += [f"v[{q}]"] + [f"G[{q}][{i}][{b}]" for i in range(ref.n_nodes) for b in range(ref.dim)]
-        fragments.append(Fragment(tuple(temps), tuple(outputs)))
-    return tuple(fragments), names
-
-
-def numeric(x) -> sp.Expr:
-    """A rule-dependent number for code: exact when it is a short binary fraction, else 30 digits.
-
-    Keeping 1, 1/2, 1/8 ... exact lets sympy fold them (no 1.0*X in the code);
-    irrational Gauss points become floats, which is all the compiler needs.
-    """
-    x = sp.sympify(x)
-    if x.is_Rational and x.q <= 1024:
-        return x
-    value = sp.N(x, 30)
-    approx = Fraction(float(value)).limit_denominator(1024)
-    if abs(value - sp.Rational(approx.numerator, approx.denominator)) < 1e-25:
-        return sp.Rational(approx.numerator, approx.denominator)
-    return sp.Float(sp.N(x, 30), 30)
+    return tuple(table), names
 
 
 def _law_code(deriv, law, max_ops):
@@ -230,7 +218,7 @@ def _op_counts(ir: KernelIR) -> dict:
     K = pairs * dim * dim * 2 * dim
     J = 14 if ir.J is not None else 0
     return {
-        "constants": sum(f.ops for f in ir.geometry) + ir.material.ops,
+        "constants": nq * (2 * n * dim * dim + ir.geometry.ops + 1 + n * dim * (2 * dim - 1)) + ir.material.ops,
         "energy": nq * (F + J + law["energy"] + 2),
         "forces": nq * (F + J + law["gradient"] + forces),
         "stiffness": nq * (F + J + law["tangent"] + H + K),

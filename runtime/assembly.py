@@ -15,6 +15,7 @@ import time
 
 import numba
 import numpy as np
+from threadpoolctl import threadpool_limits
 import scipy.sparse as sp
 from numba import njit, prange
 
@@ -99,7 +100,10 @@ def project_psd(K: np.ndarray) -> np.ndarray:
     convex state costs one batched eigenvalue computation.
     """
     K = 0.5 * (K + np.swapaxes(K, 1, 2))          # kernels are symmetric up to round-off
-    w, V = np.linalg.eigh(K)
+    # Many tiny eigenproblems: BLAS threads only add overhead (measured 3.1 s vs 0.04 s
+    # for 288 30x30 matrices on 2 cores), so run them single-threaded.
+    with threadpool_limits(limits=1, user_api="blas"):
+        w, V = np.linalg.eigh(K)
     bad = np.flatnonzero(w[:, 0] < 0.0)
     if bad.size:
         wb = np.maximum(w[bad], 0.0)

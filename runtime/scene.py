@@ -127,7 +127,7 @@ class Solver:
     newton_tolerance: float = 1e-8        # relative residual
     newton_max_iterations: int = 25
     rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)
-    project_psd: bool | None = None       # None: on for non-convex laws
+    project_psd: bool | None = None       # None: plain Newton, projection switched on when a step fails to descend
     backend: str = "numba"                # kernel backend: numba | c
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import jinja2
 
 from .. import GENERATOR_VERSION
+from .printing import float_literal
 
 
 
@@ -66,11 +67,10 @@ def print_fragment(fragment, printer) -> dict:
 
 def printed(ir, printer) -> dict:
     """The IR's expressions as code strings of one language: what templates receive."""
-    geometry = []
-    for q, frag in enumerate(ir.geometry):
-        code = print_fragment(frag, printer)
-        outputs = [(q * ir.point_stride + k, c) for k, (_, c) in enumerate(code["outputs"][:-1])]
-        geometry.append({"temps": code["temps"], "outputs": outputs, "detJ": code["outputs"][-1][1]})
+    geometry = {
+        "temps": [(str(sym), printer.doprint(e)) for sym, e in ir.geometry.temporaries],
+        "G": [(b, printer.doprint(e)) for b, e in ir.geometry_G],
+    }
     material = [(ir.material_offset + k, printer.doprint(e)) for k, (_, e) in enumerate(ir.material.outputs)]
     law = {variant: [print_fragment(f, printer) for f in frags] for variant, frags in ir.law_code.items()}
     chain = {
@@ -83,6 +83,8 @@ def printed(ir, printer) -> dict:
         "material": material,
         "law": law,
         "J": printer.doprint(ir.J) if ir.J is not None else None,
+        "dN_table": [[[float_literal(x) for x in node] for node in point] for point in ir.dN_table],
+        "weights": [float_literal(w) for w in ir.weights],
         "chain": chain,
     }
 
