@@ -529,6 +529,9 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="FILE", help="also write the report as JSON")
     p.add_argument("--entries", nargs="+", metavar="NAME", help=f"entries (default: {' '.join(COMPILE_ENTRIES)})")
     p.set_defaults(run=cmd_compile)
+
+    from .bench_steps import add_steps_command
+    add_steps_command(sub)
     return bench
 
 
