@@ -18,7 +18,7 @@ from . import GENERATOR_VERSION
 from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
-from .fragments import DEFAULT_MAX_OPS, Fragment, eliminate, split
+from .fragments import DEFAULT_MAX_OPS, Fragment, split
 from .quadrature import QuadratureRule, rule as get_rule, rule_for_degree
 
 EXACT = "exact"

@@ -123,7 +123,7 @@ class Simulation:
         return self.summary
 
     def _loop(self) -> dict:
-        ctx, integ, model = self.ctx, self.integrator, self.model
+        integ, model = self.integrator, self.model
         history = {k: [] for k in ("time", "newton", "wall", "elastic", "kinetic", "external_work")}
         self._write(0)
         for k in range(1, integ.n_steps + 1):

@@ -11,7 +11,7 @@ import json
 from sympy.printing.c import C99CodePrinter
 
 from . import environment, header_line, templates_hash
-from .printing import float_literal, power
+from .printing import DoubleLiterals, power
 
 LANGUAGE = "c"
 SUFFIX = ".c"
@@ -23,22 +23,13 @@ METADATA_TAG = "tensormass-metadata"
 _POWER_HELPERS = {2: "tm_sq", 3: "tm_cube", 4: "tm_pow4"}
 
 
-class CPrinter(C99CodePrinter):
+class CPrinter(DoubleLiterals, C99CodePrinter):
     """Scalar math for C99: <math.h> functions, full-precision double literals, products for small powers."""
 
     _sqrt = "sqrt"
 
     def __init__(self):
         super().__init__()
-
-    def _print_Float(self, expr):
-        return float_literal(expr)
-
-    def _print_Rational(self, expr):
-        return float_literal(expr.p / expr.q)
-
-    def _print_Integer(self, expr):
-        return float_literal(int(expr))
 
     def _print_Pow(self, expr, rational=False):
         base, exp = expr.as_base_exp()

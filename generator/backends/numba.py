@@ -1,32 +1,22 @@
 """numba backend: one Python module per kernel, @njit(cache=True) loops over elements."""
 from __future__ import annotations
 
-import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
 from . import environment, header_line
-from .printing import float_literal, power
+from .printing import DoubleLiterals, power
 
 LANGUAGE = "numba"
 SUFFIX = ".py"
 
 
-class NumbaPrinter(PythonCodePrinter):
+class NumbaPrinter(DoubleLiterals, PythonCodePrinter):
     """Scalar math for numba: math.* functions, float literals, products for small powers."""
 
     _sqrt = "math.sqrt"
 
     def __init__(self):
         super().__init__({"fully_qualified_modules": True, "standard": "python3"})
-
-    def _print_Float(self, expr):
-        return float_literal(expr)
-
-    def _print_Rational(self, expr):
-        return float_literal(expr.p / expr.q)
-
-    def _print_Integer(self, expr):
-        return float_literal(int(expr))
 
     def _print_Pow(self, expr, rational=False):
         return power(self, expr, "math.pow")

@@ -22,3 +22,16 @@ def power(printer, expr: sp.Pow, pow_function: str) -> str:
     if exp == sp.Rational(-1, 2):
         return f"(1.0/{printer._sqrt}({printer._print(base)}))"
     return f"{pow_function}({printer._print(base)}, {float_literal(exp)})"
+
+
+class DoubleLiterals:
+    """Printer mixin: every number is a full-precision double literal (1/2 -> 0.5, 2 -> 2.0)."""
+
+    def _print_Float(self, expr):
+        return float_literal(expr)
+
+    def _print_Rational(self, expr):
+        return float_literal(expr.p / expr.q)
+
+    def _print_Integer(self, expr):
+        return float_literal(int(expr))
