@@ -65,8 +65,8 @@ def cmd_generate(args) -> int:
     if args.check:
         return check(selected, backends)
     out = Path(args.out)
-    generate_all(selected, backends, out)
-    if "numba" in backends and not args.no_compile:
+    generate_all(selected, backends, out, constants=args.constants)
+    if "numba" in backends and not args.no_compile and args.constants == "precompute":
         report_numba_compile_times(selected, out)
     return 0
 
@@ -145,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quadrature", nargs="+", help="quadrature(s) or all: gauss1 gauss2 gauss3 exact")
     p.add_argument("--backend", nargs="+", help=f"backend(s) or all: {', '.join(BACKENDS)}")
     p.add_argument("--out", default="tensormass-kernels", help="output folder (default: ./tensormass-kernels)")
+    p.add_argument("--constants", choices=("precompute", "recompute"), default="precompute",
+                   help="precompute: shape gradients and det J per point stored per element (default, the catalogue); "
+                        "recompute: store rest coordinates and recompute the geometry at every call")
     p.add_argument("--check", action="store_true", help="regenerate into a temporary folder and diff with generated/")
     p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
     p.set_defaults(run=cmd_generate)

@@ -50,6 +50,7 @@ class KernelIR:
     chain: dict                  # chain-rule statements (forces, tangent H, stiffness K)
     rule_points: tuple
     rule_weights: tuple
+    recompute: bool = False      # D holds rest coordinates; G and det J are recomputed every call
     ops: dict = field(default_factory=dict)
     input_hash: str = ""
 
@@ -97,7 +98,20 @@ def exact_degree(element_name: str, law) -> int | None:
     return None if degree is None else degree * (ref.order - 1)
 
 
-def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = DEFAULT_MAX_OPS) -> KernelIR:
+CONSTANTS_MODES = ("precompute", "recompute")
+
+
+def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = DEFAULT_MAX_OPS,
+             constants: str = "precompute") -> KernelIR:
+    """The IR of one kernel.
+
+    constants="precompute" (the catalogue) stores v = w det J and the shape gradients G of every
+    integration point in D; "recompute" stores only the rest coordinates and recomputes them at
+    every call: less memory traffic, more arithmetic (the kernel benchmark compares both).
+    """
+    if constants not in CONSTANTS_MODES:
+        raise ValueError(f"unknown constants mode {constants!r}; use one of {', '.join(CONSTANTS_MODES)}")
+    recompute = constants == "recompute"
     ref = get_element(element_name)
     law = laws_pkg.get(law_name)
     rule = resolve_rule(element_name, law, quadrature)
@@ -109,15 +123,17 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     law_code, material, J = _law_code(deriv, law, max_ops)
     stride = 1 + n * dim
     material_names = tuple(name for name, _ in material.outputs)
+    if recompute:
+        names = [f"X[{i}][{k}]" for i in range(n) for k in range(dim)]
     ir = KernelIR(
-        name=f"{element_name}_{law_name}_{quadrature}",
+        name=f"{element_name}_{law_name}_{quadrature}" + ("_recompute" if recompute else ""),
         element=element_name, law=law_name, quadrature=quadrature,
         dim=dim, n_nodes=n, n_points=rule.n_points,
         parameters=tuple(law.parameters),
         requires_positive_J=law.requires_positive_J,
         affine_edges=_midside_edges(ref) if quadrature == EXACT else (),
-        point_stride=stride,
-        material_offset=stride * rule.n_points,
+        point_stride=0 if recompute else stride,
+        material_offset=len(names),
         material_names=material_names,
         constant_names=tuple(names) + material_names,
         geometry=Fragment(tuple(geo_temps), ()),
@@ -130,6 +146,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         chain=_chain_rule(deriv),
         rule_points=tuple(tuple(float(x) for x in p) for p in rule.points),
         rule_weights=tuple(float(w) for w in rule.weights),
+        recompute=recompute,
     )
     ir.ops = _op_counts(ir)
     ir.input_hash = _input_hash(ref, rule, law)
@@ -217,8 +234,10 @@ def _op_counts(ir: KernelIR) -> dict:
     pairs = n * (n + 1) // 2
     K = pairs * dim * dim * 2 * dim
     J = 14 if ir.J is not None else 0
+    geometry = 2 * n * dim * dim + ir.geometry.ops + 1 + n * dim * (2 * dim - 1)
+    F += geometry if ir.recompute else 0
     return {
-        "constants": nq * (2 * n * dim * dim + ir.geometry.ops + 1 + n * dim * (2 * dim - 1)) + ir.material.ops,
+        "constants": nq * geometry + ir.material.ops,
         "energy": nq * (F + J + law["energy"] + 2),
         "forces": nq * (F + J + law["gradient"] + forces),
         "stiffness": nq * (F + J + law["tangent"] + H + K),

@@ -37,11 +37,11 @@ def write_atomic(path: Path, text: str) -> None:
         raise
 
 
-def generate_entry(entry: Entry, backends, out: Path) -> dict:
+def generate_entry(entry: Entry, backends, out: Path, constants: str = "precompute") -> dict:
     """Generate one entry for the given backends; returns its manifest record."""
-    ir = build_ir(entry.element, entry.law, entry.quadrature)
+    ir = build_ir(entry.element, entry.law, entry.quadrature, constants=constants)
     record = {
-        "element": ir.element, "law": ir.law, "quadrature": ir.quadrature,
+        "name": ir.name, "element": ir.element, "law": ir.law, "quadrature": ir.quadrature,
         "dim": ir.dim, "nodes": ir.n_nodes, "points": ir.n_points,
         "constants": ir.n_constants, "ops": dict(sorted(ir.ops.items())),
         "files": {}, "inputs": {},
@@ -62,7 +62,7 @@ def update_manifest(out: Path, records: list[dict]) -> None:
     if path.exists():
         manifest["entries"] = json.loads(path.read_text())["entries"]
     for r in records:
-        key = f"{r['element']}_{r['law']}_{r['quadrature']}"
+        key = r["name"]
         old = manifest["entries"].get(key, {})
         # Keep files of other backends generated earlier for the same entry.
         r = {**r, "files": {**old.get("files", {}), **r["files"]}, "inputs": {**old.get("inputs", {}), **r["inputs"]}}
@@ -73,13 +73,16 @@ def update_manifest(out: Path, records: list[dict]) -> None:
     write_atomic(path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
 
-def generate_all(entries, backends=BACKENDS, out: Path = None, progress=print) -> list[dict]:
-    """Generate every entry; prints progress and the time each one took."""
+def generate_all(entries, backends=BACKENDS, out: Path = None, progress=print, constants: str = "precompute") -> list[dict]:
+    """Generate every entry; prints progress and the time each one took.
+
+    constants: "precompute" (G and det J of every point stored in D, the catalogue) or
+    "recompute" (D holds rest coordinates; files are named <entry>_recompute)."""
     out = Path(out)
     records, start = [], time.perf_counter()
     for k, entry in enumerate(entries, 1):
         t0 = time.perf_counter()
-        record = generate_entry(entry, backends, out)
+        record = generate_entry(entry, backends, out, constants)
         record_time = time.perf_counter() - t0
         records.append(record)
         if progress:

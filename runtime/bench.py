@@ -194,7 +194,7 @@ def _bench_entry(entry, n, backends, repeats, seed, log, cold_compile) -> dict:
     import numba
 
     from .classic import LAWS, load_classic
-    from .kernels import load_kernel
+    from .kernels import load_kernel, load_recompute_kernel
 
     result = {"entry": entry.name, "element": entry.element, "law": entry.law, "quadrature": entry.quadrature,
               "n_elements": n, "rates": {}, "ratios": {}, "compile": {}, "errors": {}}
@@ -229,6 +229,21 @@ def _bench_entry(entry, n, backends, repeats, seed, log, cold_compile) -> dict:
             lambda Db=Db, mod=mod: mod.forces_and_stiffness(Db, u, f, K, flags),
             {"forces": lambda Db=Db, mod=mod: mod.forces(Db[:1], u[:1], f[:1], flags[:1]),
              "forces_and_stiffness": lambda Db=Db, mod=mod: mod.forces_and_stiffness(Db[:1], u[:1], f[:1], K[:1], flags[:1])}))
+    # The generator's other constants mode: rest coordinates in D, geometry recomputed per call.
+    for backend in list(kernels):
+        try:
+            variant = load_recompute_kernel(entry.element, entry.law, entry.quadrature, backend)
+        except TensormassError as error:
+            result["errors"][f"{backend}-recompute"] = str(error)
+            continue
+        Dv, mod = variant.constants(X, E=1.0e5, nu=0.3), variant.module
+        result.setdefault("recompute_constants_bytes", variant.n_constants * 8)
+        impls.append(_Impl(
+            f"{backend}-recompute",
+            lambda Dv=Dv, mod=mod: mod.forces(Dv, u, f, flags),
+            lambda Dv=Dv, mod=mod: mod.forces_and_stiffness(Dv, u, f, K, flags),
+            {"forces": lambda Dv=Dv, mod=mod: mod.forces(Dv[:1], u[:1], f[:1], flags[:1]),
+             "forces_and_stiffness": lambda Dv=Dv, mod=mod: mod.forces_and_stiffness(Dv[:1], u[:1], f[:1], K[:1], flags[:1])}))
     classic = None
     if entry.law in LAWS and first.dim == 3:
         classic = load_classic(entry.element, entry.law, entry.quadrature)
@@ -270,6 +285,11 @@ def _bench_entry(entry, n, backends, repeats, seed, log, cold_compile) -> dict:
             result["compile"]["c"].update(_c_compile_record(kernels["c"]))
         except TensormassError as error:
             result["errors"]["c_compile"] = str(error)
+    # Which constants mode is faster, per backend and kernel: the benchmark's pick.
+    result["constants_mode"] = {
+        b: {kind: ("recompute" if result["rates"].get(f"{b}-recompute", {}).get(kind, 0) > result["rates"][b][kind]
+                   else "precompute") for kind in KINDS}
+        for b in kernels}
     if classic is not None:
         for kind in KINDS:
             base = result["rates"]["classic"][kind]
@@ -353,6 +373,16 @@ def format_kernel_report(report: dict) -> str:
             rows.append((r["entry"], _rate(rate["c"]), _rate(rate["numba"]), _rate(rate["classic"]),
                          _ratio(ratio.get("best")), _ratio(ratio.get("c")), _ratio(ratio.get("numba"))))
         out += ["", _table(rows)]
+    rows = [("constants: precompute vs recompute", "C f", "C f recomp.", "C f+K", "C f+K recomp.",
+             "numba f", "numba f recomp.", "numba f+K", "numba f+K recomp.", "B/elem pre", "B/elem recomp.")]
+    for r in report["results"]:
+        rate = lambda b, kind: _rate(r["rates"].get(b, {}).get(kind))   # noqa: E731
+        rows.append((r["entry"], rate("c", "forces"), rate("c-recompute", "forces"),
+                     rate("c", "forces_and_stiffness"), rate("c-recompute", "forces_and_stiffness"),
+                     rate("numba", "forces"), rate("numba-recompute", "forces"),
+                     rate("numba", "forces_and_stiffness"), rate("numba-recompute", "forces_and_stiffness"),
+                     r.get("constants_bytes", "-"), r.get("recompute_constants_bytes", "-")))
+    out += ["", _table(rows)]
     rows = [("kernel", "points", "ops f", "ops f+K", "B/elem gen", "B/elem classic", "gcc s", "gcc MB",
              "numba 1st f s", "numba 1st f+K s")]
     for r in report["results"]:

@@ -279,6 +279,7 @@ class CModule:
         self.N_CONSTANTS = int(meta["n_constants"])
         self.PARAMETERS = tuple(meta["parameters"])
         self.REQUIRES_POSITIVE_J = bool(meta["requires_positive_J"])
+        self.RECOMPUTE = bool(meta.get("recompute", False))
         self.OPS = dict(meta["ops"])
         self.LIBRARY = library
         self.SOURCE = source
@@ -347,28 +348,34 @@ def _open(meta: dict, lib: Path, source: Path, compiled):
 
 def c_module(entry) -> CModule:
     """The compiled C kernel of a catalogue entry: from the cache when valid, else compiled now."""
+    return load_c_source(source_path(entry), entry.name)
+
+
+def load_c_source(source: Path, expected_name: str | None = None) -> CModule:
+    """Compile (or take from the cache) and load one generated C file."""
     command = compiler()
     flags = cflags()
-    source = source_path(entry)
+    source = Path(source)
     text = source.read_text(encoding="utf-8")
     meta = parse_metadata(text, source)
-    if meta.get("name") != entry.name:
-        raise TensormassError(f"{source}: holds kernel {meta.get('name')!r}, expected {entry.name!r}")
-    lib = library_path(entry.name, text, command, flags)
+    name = meta.get("name")
+    if expected_name is not None and name != expected_name:
+        raise TensormassError(f"{source}: holds kernel {name!r}, expected {expected_name!r}")
+    lib = library_path(name, text, command, flags)
     with _lock:
         module = _loaded.get(str(lib))
         if module is not None and _verified(lib):
             return module
         compiled = None
         if not _verified(lib):
-            compiled = build(entry.name, source, lib, command, flags)
+            compiled = build(name, source, lib, command, flags)
         try:
             module = _open(meta, lib, source, compiled)
         except (OSError, AttributeError):
             if compiled is not None:
                 raise
             # The hash matched but the library does not load (or lacks a symbol): build it again.
-            compiled = build(entry.name, source, lib, command, flags)
+            compiled = build(name, source, lib, command, flags)
             module = _open(meta, lib, source, compiled)
         _loaded[str(lib)] = module
         return module

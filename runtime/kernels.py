@@ -48,6 +48,8 @@ class Kernel:
         self.parameters = tuple(module.PARAMETERS)
         self.ops = dict(module.OPS)
         self.n_dofs = self.n_nodes * self.dim
+        # "recompute" kernels (a generator option) keep rest coordinates in D instead of G.
+        self.recompute = bool(getattr(module, "RECOMPUTE", False))
 
     def __repr__(self):
         return f"<Kernel {self.element}/{self.law}/{self.quadrature} ({self.backend})>"
@@ -136,6 +138,8 @@ class Kernel:
 
     def inverted(self, D, u) -> np.ndarray:
         """Boolean mask of elements whose det F <= 0 at some integration point (any law)."""
+        if self.recompute:
+            raise TensormassError(f"{self}: inverted() needs precomputed shape gradients (constants='precompute')")
         D, u = self._displacements(D, u)
         return _min_det_F(D, u, self.n_points, 1 + self.n_dofs, self.n_nodes, self.dim) <= 0.0
 
@@ -176,9 +180,33 @@ def _numba_module(name: str, entry):
         generate_all([entry], ["numba"], cache_dir(), progress=None)
     if not path.exists():
         raise KernelNotFoundError(f"could not generate kernel {name}")
-    module_name = f"tensormass_cache_{name}"
+    return _import_path(path, f"tensormass_cache_{name}")
+
+
+def _import_path(path: Path, module_name: str):
     spec = importlib.util.spec_from_file_location(module_name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[module_name] = module
     spec.loader.exec_module(module)
     return module
+
+
+@lru_cache(maxsize=None)
+def load_recompute_kernel(element: str, law: str, quadrature: str, backend: str = "numba") -> Kernel:
+    """The generator's constants="recompute" variant (D holds rest coordinates, the geometry is
+    recomputed every call), generated into the cache on first use. Used by the kernel benchmark
+    to compare memory traffic against arithmetic; not part of the committed catalogue."""
+    from ..generator.backends import generate
+    from ..generator.ir import build_ir
+    from ..generator.pipeline import write_atomic
+    if backend not in BACKENDS:
+        raise TensormassError(f"unknown backend {backend!r}; known backends: {', '.join(BACKENDS)}")
+    ir = build_ir(element, law, quadrature, constants="recompute")
+    path = cache_dir() / "recompute" / backend / (ir.name + (".py" if backend == "numba" else ".c"))
+    text = generate(ir, backend)
+    if not path.exists() or path.read_text(encoding="utf-8") != text:
+        write_atomic(path, text)
+    if backend == "numba":
+        return Kernel(_import_path(path, f"tensormass_recompute_{ir.name}"), "numba")
+    from .compile import load_c_source
+    return Kernel(load_c_source(path, ir.name), "c")

@@ -86,6 +86,7 @@ def metadata(ir) -> str:
         "n_dofs": ir.n_dofs,
         "parameters": list(ir.parameters),
         "requires_positive_J": bool(ir.requires_positive_J),
+        **({"recompute": True} if ir.recompute else {}),
         "ops": dict(sorted(ir.ops.items())),
         "templates": templates_hash(LANGUAGE)[:16],
     }, sort_keys=True)
