@@ -158,10 +158,10 @@ def test_recompute_constants_mode_matches_precompute(backend):
     energy, forces and stiffness as the catalogue's precomputed shape gradients."""
     from tensormass.runtime.kernels import load_recompute_kernel
     from helpers import random_elements
-    for element, law, quadrature in [("hexahedron", "neohookean", "gauss2"), ("triangle6", "stvk", "gauss2")]:
-        variant = load_recompute_kernel(element, law, quadrature, backend)
-        reference = tm.load_kernel(element, law, quadrature, backend)
-        X = random_elements(element, 6, seed=2)
+    for name, law, quadrature in [("hexahedron", "neohookean", "gauss2"), ("triangle6", "stvk", "gauss2")]:
+        variant = load_recompute_kernel(name, law, quadrature, backend)
+        reference = tm.load_kernel(name, law, quadrature, backend)
+        X = random_elements(name, 6, seed=2)
         u = 0.03 * np.random.default_rng(0).standard_normal((6, variant.n_dofs))
         Dv, Dr = variant.constants(X, E=2.0, nu=0.3), reference.constants(X, E=2.0, nu=0.3)
         assert Dv.shape[1] < Dr.shape[1]                  # rest coordinates instead of G and v per point
