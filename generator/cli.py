@@ -5,7 +5,8 @@
     tensormass generate --check                   regenerate the catalogue and diff it with generated/
     tensormass run SCENE.toml [--json SUMMARY]    simulate a scene
     tensormass demo                               the embedded default scene (a mixed bar under gravity)
-    tensormass bench kernels|compile [--json F]   kernel throughput against a classic loop; compile budget
+    tensormass bench kernels|compile|steps        kernel throughput against a classic loop; compile budget; steps
+    tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
 
 Bad input exits with code 2 and a message naming the problem.
 """
@@ -154,8 +155,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     from ..runtime.bench import add_bench_command
     from ..runtime.commands import add_commands
+    from ..runtime.reports import add_report_command
     add_commands(sub)                      # run, demo
-    add_bench_command(sub)                 # bench kernels, bench compile
+    add_bench_command(sub)                 # bench kernels, bench compile, bench steps
+    add_report_command(sub)                # report accuracy, report stability
     return parser
 
 

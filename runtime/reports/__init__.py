@@ -1,0 +1,16 @@
+"""`tensormass report accuracy|stability`: what a setting costs and whether it survives.
+
+accuracy   sweeps element x law x quadrature x resolution over benchmarks with known answers
+           and writes results.csv, error_vs_time.png (Pareto front), convergence.png, report.md
+stability  runs the stiff and extreme cases of the brief and writes a table and report.md
+"""
+from __future__ import annotations
+
+
+def add_report_command(subparsers) -> None:
+    from .accuracy import add_accuracy_command
+    from .stability import add_stability_command
+    report = subparsers.add_parser("report", help="accuracy against run time; stability on stiff and extreme cases")
+    sub = report.add_subparsers(dest="report_command", required=True)
+    add_accuracy_command(sub)
+    add_stability_command(sub)

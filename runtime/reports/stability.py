@@ -1,0 +1,545 @@
+"""`tensormass report stability`: the stiff and extreme cases of the brief, each with a checked expectation.
+
+    rows = run_stability("out", quick=True)     # writes out/stability.csv and out/report.md
+
+Every case runs on a tiny mesh with few steps and ends in one of four outcomes:
+
+    stable               the run finished, every value finite and bounded
+    recovered            the run finished and the body returned close to its rest shape
+    diverged (detected)  the runtime stopped with an error (instability, failed step) - no silent NaN
+    refused (reason)     the scene, mesh or initial state was rejected before stepping
+
+A case is ``ok`` when its outcome is one of those its expectation allows (and any extra
+check, e.g. Hooke's ghost forces under a rigid rotation, holds). Nothing written is NaN.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import TensormassError
+
+__all__ = ["run_stability", "add_stability_command", "COLUMNS"]
+
+COLUMNS = ("case", "law", "integrator", "dt", "outcome", "expected", "ok", "max_energy", "max_abs_u",
+           "min_det_F", "newton_iterations", "linear_iterations", "wall_time", "message")
+
+STABLE, RECOVERED, DIVERGED = "stable", "recovered", "diverged (detected)"
+GRAVITY = 9.81
+BAR = (1.0, 0.2, 0.2)
+
+
+# ============================================================================== helpers
+
+
+def _scene_dict(law="stvk", kind="implicit_euler", dt=1.0 / 60, steps=5, E=1e6, nu=0.3, size=BAR,
+                cells=(4, 1, 1), element="hexahedron", gravity=True, fixed="left", rayleigh=(0.0, 0.0),
+                quadrature="gauss2", density=1000.0, newton_max_iterations=25):
+    """A validated-scene dict: a bar clamped at x = 0 (fixed="left"), at z = 0 ("bottom"), or free."""
+    big = 10.0 * max(size)
+    data = {
+        "name": "stability",
+        "mesh": {"generate": "bar", "size": list(size), "cells": list(cells), "element": element},
+        "material": [{"law": law, "quadrature": quadrature, "E": float(E), "nu": float(nu),
+                      "density": float(density)}],
+        "loads": {"gravity": [0.0, 0.0, -GRAVITY if gravity else 0.0]},
+        "solver": {"kind": kind, "dt": float(dt), "steps": int(steps), "rayleigh": list(rayleigh),
+                   "newton_max_iterations": int(newton_max_iterations)},
+        "probe": [{"name": "tip", "point": [float(size[0]), size[1] / 2, size[2] / 2]}],
+    }
+    eps = 1e-9 * max(size)
+    if fixed == "left":
+        data["fixed"] = [{"box": [[-big, -big, -big], [eps, big, big]]}]
+    elif fixed == "bottom":
+        data["fixed"] = [{"box": [[-big, -big, -big], [big, big, eps]]}]
+    return data
+
+
+def min_det_F(model, u) -> float:
+    """Smallest det F over every integration point of every element (precomputed shape gradients)."""
+    out = math.inf
+    for part in model.parts:
+        k = part.kernel
+        if getattr(k, "recompute", False):
+            continue
+        ue = model.element_displacements(part, np.asarray(u, dtype=float))
+        n, stride = len(part.D), 1 + k.n_dofs
+        for q in range(k.n_points):
+            G = part.D[:, q * stride + 1:(q + 1) * stride].reshape(n, k.n_nodes, k.dim)
+            F = np.eye(k.dim) + np.einsum("eia,eib->eab", ue, G)
+            d = np.linalg.det(F)
+            if d.size:
+                out = min(out, float(np.min(d)))
+    return out
+
+
+def _short(exc_or_text, limit=110) -> str:
+    text = str(exc_or_text).strip().splitlines()[0] if str(exc_or_text).strip() else type(exc_or_text).__name__
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _clean(text) -> str:
+    """Messages go into CSV/markdown cells: one line, no literal NaN token."""
+    text = " ".join(str(text).split())
+    return re.sub(r"\bnan\b", "non-finite", text, flags=re.IGNORECASE)
+
+
+def _md(text) -> str:
+    """A markdown table cell: _clean, with pipes escaped."""
+    return _clean(text).replace("|", "\\|")
+
+
+def _num(x):
+    """A finite float or "" (never NaN/inf in the output)."""
+    if x is None or isinstance(x, bool):
+        return ""
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return ""
+    return x if math.isfinite(x) else ""
+
+
+class _Run:
+    """One simulation case: builds, runs, tracks max |u|, min det F, energies; classifies the outcome."""
+
+    def __init__(self, case, law, integrator, dt, expected, allowed):
+        self.row = {c: "" for c in COLUMNS}
+        self.row.update(case=case, law=law, integrator=integrator, dt=_num(dt), expected=expected)
+        self.allowed = allowed            # callable(outcome) -> bool
+        self.sim = None
+        self.max_u = 0.0
+        self.min_det = math.inf
+        self.extra = []                   # extra message parts
+        self.start = time.perf_counter()
+
+    def _track(self, k=None, n=None):
+        u = self.sim.ctx.u
+        if np.all(np.isfinite(u)):
+            self.max_u = max(self.max_u, float(np.abs(u).max()) if u.size else 0.0)
+            self.min_det = min(self.min_det, min_det_F(self.sim.model, u))
+
+    def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
+        """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
+        from ..scene import Scene
+        from ..simulation import Simulation
+        try:
+            scene = Scene.from_dict(scene_data)
+            self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0)
+            if u0 is not None:
+                self.min_det = min_det_F(sim.model, sim._u0)
+                self.max_u = float(np.abs(u0).max())
+                if refuse_inverted_start:
+                    self._refuse_inverted(sim, sim._u0)
+        except TensormassError as exc:
+            return self._finish(f"refused ({_short(exc)})", str(exc))
+        try:
+            summary = sim.run()
+        except TensormassError as exc:
+            if sim.ctx is not None:
+                self.row["newton_iterations"] = sim.ctx.newton_iterations
+                self.row["linear_iterations"] = sim.ctx.linear_iterations
+            return self._finish(DIVERGED, f"{type(exc).__name__}: {exc}")
+        self.row["newton_iterations"] = summary.iterations["newton"]
+        self.row["linear_iterations"] = summary.iterations["linear"]
+        energies = [e for e in summary.per_step.get("elastic", []) if e is not None]
+        u = sim.ctx.u
+        if not (np.all(np.isfinite(u)) and all(math.isfinite(e) for e in energies)):
+            # the runtime should never get here; the report says so instead of writing NaN
+            return self._finish(DIVERGED, "non-finite state NOT caught by the runtime (found by the report)",
+                                force_fail=True)
+        if energies:
+            self.row["max_energy"] = _num(max(energies))
+        if judge is None:
+            return self._finish(STABLE, "finished; all values finite")
+        outcome, message = judge(sim, summary)
+        return self._finish(outcome, message)
+
+    def _refuse_inverted(self, sim, u):
+        from ... import laws
+        for p in sim.model.parts:
+            if laws.get(p.law).requires_positive_J:
+                bad = p.kernel.inverted(p.D, sim.model.element_displacements(p, u))
+                if bad.any():
+                    ids = ", ".join(str(int(i)) for i in p.cell_ids[bad][:8])
+                    more = f" and {int(bad.sum()) - 8} more" if bad.sum() > 8 else ""
+                    raise TensormassError(f"inverted elements in the initial state (det F <= 0, law {p.law!r} "
+                                          f"is undefined there): element(s) {ids}{more}")
+
+    def _finish(self, outcome, message, force_fail=False):
+        r = self.row
+        r["outcome"] = outcome
+        r["max_abs_u"] = _num(self.max_u)
+        r["min_det_F"] = _num(self.min_det)
+        r["wall_time"] = round(time.perf_counter() - self.start, 4)
+        parts = [message] + self.extra
+        if self.min_det <= 0:
+            parts.append(f"some element inverted (min det F = {self.min_det:.3g}, initial state included)")
+        r["message"] = _clean("; ".join(p for p in parts if p))
+        r["ok"] = bool(self.allowed(outcome)) and not force_fail
+        return r
+
+
+def _any_detected(outcome) -> bool:
+    return outcome in (STABLE, RECOVERED, DIVERGED) or outcome.startswith("refused (")
+
+
+def _is(*names):
+    return lambda outcome: outcome in names
+
+
+def _refused(outcome) -> bool:
+    return outcome.startswith("refused (")
+
+
+# ============================================================================== cases
+
+
+def case_stiffness(quick):
+    """1. E sweep with linearly implicit Euler at dt = 1/60 and 0.1: stable, bounded."""
+    Es = (1e3, 1e6, 1e10) if quick else (1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10)
+    dts = (1.0 / 60, 0.1)
+    steps = 6 if quick else 12
+    rows = []
+    for E in Es:
+        for dt in dts:
+            bound = GRAVITY * (dt * steps) ** 2 + 10.0 * max(BAR)
+            run = _Run(f"stiffness E={E:.0e}", "stvk", "implicit_euler", dt,
+                       f"stable: all finite, max|u| <= {bound:.3g} (free fall over the run + 10 x size)",
+                       _is(STABLE))
+
+            def judge(sim, summary, bound=bound, run=run):
+                ok = run.max_u <= bound
+                return (STABLE if ok else DIVERGED,
+                        f"max|u| = {run.max_u:.3g} m (bound {bound:.3g}); tip z = {summary.probes['tip'][2]:.4g} m")
+            rows.append(run.execute(_scene_dict("stvk", "implicit_euler", dt, steps, E=E), judge=judge))
+    return rows
+
+
+def case_poisson(quick):
+    """2. nu -> 0.5 with Hooke, static: stable (tip deflection shows locking); nu = 0.5 refused."""
+    nus = (0.3, 0.49, 0.4999, 0.5) if quick else (0.3, 0.45, 0.49, 0.499, 0.4999, 0.5)
+    rows = []
+    for nu in nus:
+        if nu >= 0.5:
+            run = _Run(f"poisson nu={nu}", "hooke", "static", None, "refused (scene validation: nu >= 0.5)",
+                       _refused)
+        else:
+            run = _Run(f"poisson nu={nu}", "hooke", "static", None, "stable (tip deflection reported: locking)",
+                       _is(STABLE))
+
+        def judge(sim, summary):
+            tip = summary.probes["tip"]
+            return STABLE, f"tip deflection z = {tip[2]:.5g} m (smaller as nu -> 0.5: volumetric locking)"
+        rows.append(run.execute(_scene_dict("hooke", "static", 1.0, 1, E=1e6, nu=nu,
+                                            cells=(4, 1, 1) if quick else (6, 2, 2)), judge=judge))
+    return rows
+
+
+def _stable_dt(scene_data) -> float:
+    from ..integrators import Context, stable_time_step
+    from ..model import Model
+    from ..scene import Scene
+    return float(stable_time_step(Context(Model.from_scene(Scene.from_dict(scene_data)))))
+
+
+def case_explicit(quick):
+    """3. symplectic Euler at 0.5x, 1x, 2x the estimated stable step."""
+    law = "hooke"
+    base = _scene_dict(law, "explicit", 1e-3, 1, E=1e6)
+    crit = _stable_dt(base)
+    steps = 150 if quick else 400
+    rows = []
+    for factor, expected, allowed in ((0.5, "stable", _is(STABLE)),
+                                      (1.0, "stable or diverged (detected): at the limit, just reported",
+                                       _is(STABLE, DIVERGED)),
+                                      (2.0, "diverged (detected)", _is(DIVERGED))):
+        dt = factor * crit
+        run = _Run(f"explicit {factor:g}x stable dt", law, "explicit", dt, expected, allowed)
+        run.extra.append(f"estimated stable dt {crit:.4g} s, {steps} steps")
+        data = _scene_dict(law, "explicit", dt, steps, E=1e6)
+        rows.append(run.execute(data))
+    return rows
+
+
+def _rest_points(size, cells, element="hexahedron"):
+    from ..mesh import generate_bar
+    return generate_bar(size, cells, element).points
+
+
+def _recovery_judge(run, initial, tol=0.05):
+    def judge(sim, summary):
+        final = float(np.abs(sim.ctx.u).max())
+        rel = final / initial if initial > 0 else 0.0
+        if rel < tol:
+            return RECOVERED, f"final max|u| = {final:.3g} = {100 * rel:.3g} % of the initial {initial:.3g}"
+        return STABLE, f"not recovered: final max|u| = {final:.3g} = {100 * rel:.3g} % of the initial {initial:.3g}"
+    return judge
+
+
+CUBE = (1.0, 1.0, 1.0)
+
+
+def case_squash(quick):
+    """4. a cube squashed to 10 % of its height (bottom clamped), released with backward Euler."""
+    laws_ = ("stable_neohookean", "neohookean") if quick else ("stable_neohookean", "neohookean",
+                                                                "mooney_rivlin", "stvk")
+    cells = (2, 2, 2)
+    X = _rest_points(CUBE, cells)
+    u0 = np.zeros_like(X)
+    u0[:, 2] = -0.9 * X[:, 2]            # z -> 0.1 z: 10 % of the height
+    dt, steps = 0.05, 40
+    rows = []
+    for law in laws_:
+        if law == "stable_neohookean":
+            expected, allowed = "recovered (max|u| < 5 % of initial)", _is(RECOVERED)
+        elif law == "stvk":
+            expected, allowed = "anything, but detected (no silent non-finite values)", _any_detected
+        else:
+            expected, allowed = "stable/recovered, or refused/diverged (detected) if it inverts", _any_detected
+        run = _Run("squash 10% and release", law, "backward_euler", dt, expected, allowed)
+        data = _scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
+                           gravity=False, fixed="bottom", rayleigh=(2.0, 0.0))
+        initial = float(np.abs(u0).max())
+        rows.append(run.execute(data, u0=u0, refuse_inverted_start=True, judge=_recovery_judge(run, initial)))
+    return rows
+
+
+def case_scramble(quick):
+    """5. vertices scrambled by ~ one element size (bottom clamped), released with backward Euler."""
+    laws_ = ("stable_neohookean", "neohookean") if quick else ("stable_neohookean", "neohookean",
+                                                                "mooney_rivlin", "hooke", "stvk")
+    cells = (2, 2, 2)
+    X = _rest_points(CUBE, cells)
+    rng = np.random.default_rng(1234)
+    h = 1.0 / 2
+    u0 = rng.uniform(-h, h, size=X.shape)
+    u0[X[:, 2] <= 1e-12] = 0.0           # clamped nodes stay at rest
+    dt, steps = 0.05, 40
+    rows = []
+    for law in laws_:
+        if law == "stable_neohookean":
+            expected, allowed = "recovered (max|u| < 5 % of initial)", _is(RECOVERED)
+        elif law in ("neohookean", "mooney_rivlin"):
+            expected, allowed = "refused (inverted elements ...) or detected", _any_detected
+        else:
+            expected, allowed = "anything, but detected (no silent non-finite values)", _any_detected
+        run = _Run("scramble and release", law, "backward_euler", dt, expected, allowed)
+        data = _scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
+                           gravity=False, fixed="bottom", rayleigh=(2.0, 0.0))
+        initial = float(np.abs(u0).max())
+        rows.append(run.execute(data, u0=u0, refuse_inverted_start=True, judge=_recovery_judge(run, initial)))
+        if law == "neohookean":
+            # the same without the report's up-front check: what the runtime itself does
+            run = _Run("scramble and release (runtime alone)", law, "backward_euler", dt,
+                       "diverged (detected) or refused: the runtime stops with a clear message",
+                       lambda o: o == DIVERGED or _refused(o))
+            rows.append(run.execute(data, u0=u0, judge=_recovery_judge(run, initial)))
+    return rows
+
+
+def case_inverted_rest(quick):
+    """6. a rest mesh with one element's nodes swapped: refused, naming the element."""
+    from ..mesh import generate_bar
+    from ..model import Model
+    from ..scene import Material
+    element = 1
+    row = {c: "" for c in COLUMNS}
+    row.update(case="inverted rest element", law="stvk", integrator="static", expected=
+               f"refused (...) naming element {element}")
+    start = time.perf_counter()
+    mesh = generate_bar(BAR, (3, 1, 1), "hexahedron")
+    cells = mesh.blocks[0].cells
+    cells[element] = cells[element][[4, 5, 6, 7, 0, 1, 2, 3]]     # top <-> bottom: mirrored, det J < 0
+    messages = []
+    outcome = STABLE
+    for check in (True, False):      # the mesh check, then the kernel's own det J test
+        try:
+            Model(mesh, [Material(law="stvk", E=1e6, nu=0.3)], check=check)
+            messages.append(f"check={check}: accepted")
+        except TensormassError as exc:
+            messages.append(f"{'mesh check' if check else 'kernel constants'}: {exc}")
+            if outcome == STABLE:
+                outcome = f"refused ({_short(exc)})"
+    named = outcome.startswith("refused (") and all(
+        re.search(rf"\b{element}\b", m) for m in messages)
+    row.update(outcome=outcome, ok=bool(named), wall_time=round(time.perf_counter() - start, 4),
+               message=_clean("; ".join(messages)))
+    return [row]
+
+
+def case_sliver(quick):
+    """7. very thin elements: stable or refused with a clear message."""
+    rows = []
+    for law in ("stvk",) if quick else ("stvk", "stable_neohookean"):
+        run = _Run("sliver elements 1 x 1 x 1e-4", law, "implicit_euler", 0.01,
+                   "stable or refused (clear message)", lambda o: o == STABLE or _refused(o))
+        data = _scene_dict(law, "implicit_euler", 0.01, 5, E=1e6, size=(1.0, 1.0, 1e-4), cells=(2, 2, 1))
+        rows.append(run.execute(data))
+    return rows
+
+
+def case_rotation(quick):
+    """8. a rigid 90 deg rotation as the state: Hooke gives ghost forces, finite-strain laws do not."""
+    from ..assembly import Assembler
+    from ..model import Model
+    from ..scene import Scene
+    laws_ = ("hooke", "stvk", "stable_neohookean") if quick else (
+        "hooke", "stvk", "neohookean", "stable_neohookean", "mooney_rivlin")
+    rows = []
+    for law in laws_:
+        expected = ("stable; ghost force / weight > 1e-3" if law == "hooke"
+                    else "stable; ghost force / weight < 1e-8")
+        row = {c: "" for c in COLUMNS}
+        row.update(case="rigid rotation 90 deg", law=law, integrator="static (forces at the state)",
+                   expected=expected)
+        start = time.perf_counter()
+        try:
+            data = _scene_dict(law, "backward_euler", 1.0, 1, E=1e6, fixed=None)   # static needs a fixed box
+            model = Model.from_scene(Scene.from_dict(data))
+            asm = Assembler(model)
+            X = model.mesh.points
+            c = X.mean(axis=0)
+            R = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])   # 90 deg about y
+            u = ((X - c) @ R.T + c - X).ravel()
+            f = asm.forces(u)
+            W = asm.energy(u)
+            weight = float(model.mass.reshape(-1, 3)[:, 0].sum()) * GRAVITY
+            ghost = float(np.linalg.norm(f))
+            ratio = ghost / weight
+            ok = ratio > 1e-3 if law == "hooke" else ratio < 1e-8
+            row.update(outcome=STABLE if np.isfinite(ratio) else DIVERGED, ok=bool(ok and np.isfinite(ratio)),
+                       max_energy=_num(W), max_abs_u=_num(np.abs(u).max()), min_det_F=_num(min_det_F(model, u)),
+                       message=_clean(f"ghost force |f| = {ghost:.3g} N, weight {weight:.3g} N, ratio {ratio:.3g}; "
+                                      f"elastic energy {W:.3g} J"))
+        except TensormassError as exc:
+            row.update(outcome=f"refused ({_short(exc)})", ok=False, message=_clean(exc))
+        row["wall_time"] = round(time.perf_counter() - start, 4)
+        rows.append(row)
+    return rows
+
+
+def case_large_dt(quick):
+    """9. linearly implicit Euler with dt = 1 s and 10 s on a stiff beam: stable (dissipative)."""
+    rows = []
+    for dt in (1.0, 10.0):
+        steps = 3
+        bound = 10.0 * max(BAR)
+        run = _Run("large dt stiff beam E=1e9", "stvk", "implicit_euler", dt,
+                   f"stable: bounded (max|u| <= {bound:.3g})", _is(STABLE))
+
+        def judge(sim, summary, run=run, bound=bound):
+            tip = summary.probes["tip"][2]
+            return (STABLE if run.max_u <= bound else DIVERGED,
+                    f"max|u| = {run.max_u:.3g} m, tip z = {tip:.4g} m (static sag of a clamped beam)")
+        rows.append(run.execute(_scene_dict("stvk", "implicit_euler", dt, steps, E=1e9), judge=judge))
+    return rows
+
+
+CASES = (case_stiffness, case_poisson, case_explicit, case_squash, case_scramble, case_inverted_rest,
+         case_sliver, case_rotation, case_large_dt)
+
+
+# ============================================================================== output
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _fmt(value) -> str:
+    if isinstance(value, bool):
+        return str(value)
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else f"{value:.6g}"
+    return _clean(value)
+
+
+def _csv_text(rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COLUMNS)
+    for r in rows:
+        w.writerow([_fmt(r.get(c, "")) for c in COLUMNS])
+    return buf.getvalue()
+
+
+def _report_text(rows, quick, total) -> str:
+    n_ok = sum(bool(r["ok"]) for r in rows)
+    lines = ["# Stability report", "",
+             f"{'Quick' if quick else 'Full'} suite: {len(rows)} cases, {n_ok} met their expectation, "
+             f"{len(rows) - n_ok} did not; {total:.1f} s in all.", "",
+             "Outcomes: `stable`, `recovered`, `diverged (detected)`, `refused (reason)`.", "",
+             "| case | law | integrator | dt | outcome | ok | max energy | max abs u | min det F | newton | linear | wall s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        cells = [r["case"], r["law"], r["integrator"], _fmt(r["dt"]), r["outcome"], "yes" if r["ok"] else "NO",
+                 _fmt(r["max_energy"]), _fmt(r["max_abs_u"]), _fmt(r["min_det_F"]),
+                 _fmt(r["newton_iterations"]), _fmt(r["linear_iterations"]), _fmt(r["wall_time"])]
+        lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
+    lines += ["", "## Expectations", ""]
+    for r in rows:
+        met = "met" if r["ok"] else "NOT met"
+        dt = f", dt {_fmt(r['dt'])}" if r["dt"] != "" else ""
+        lines.append(f"- **{_clean(r['case'])}** ({r['law']}, {r['integrator']}{dt}): expects {_clean(r['expected'])}; "
+                     f"got `{_clean(r['outcome'])}`: {met}. {_clean(r['message'])}")
+    return "\n".join(lines) + "\n"
+
+
+def run_stability(out_dir, quick=False, progress=print) -> list:
+    """Run every case, write stability.csv and report.md into out_dir; the rows (dicts) are returned."""
+    out = Path(out_dir)
+    start = time.perf_counter()
+    rows = []
+    for case in CASES:
+        t0 = time.perf_counter()
+        try:
+            got = case(quick)
+        except Exception as exc:      # a bug in a case must not lose the others' results
+            row = {c: "" for c in COLUMNS}
+            row.update(case=case.__name__, outcome=f"refused (report error: {_short(exc)})",
+                       expected="the case runs", ok=False, message=_clean(f"{type(exc).__name__}: {exc}"))
+            got = [row]
+        rows.extend(got)
+        if progress is not None:
+            summary = ", ".join(f"{r['law']}: {r['outcome']}{'' if r['ok'] else ' (NOT ok)'}" for r in got)
+            progress(f"{case.__name__[5:]:>14s} {time.perf_counter() - t0:6.1f} s  {_short(summary, 200)}")
+    total = time.perf_counter() - start
+    _write_atomic(out / "stability.csv", _csv_text(rows))
+    _write_atomic(out / "report.md", _report_text(rows, quick, total))
+    if progress is not None:
+        n_ok = sum(bool(r["ok"]) for r in rows)
+        progress(f"{n_ok}/{len(rows)} cases met their expectation in {total:.1f} s; wrote {out / 'stability.csv'} "
+                 f"and {out / 'report.md'}")
+    return rows
+
+
+def _cmd_stability(args) -> int:
+    rows = run_stability(args.out, quick=args.quick)
+    return 0 if rows and all(r["ok"] for r in rows) else 1
+
+
+def add_stability_command(subparsers) -> None:
+    p = subparsers.add_parser("stability", help="stiff and extreme cases: stable, recovered, diverged or refused")
+    p.add_argument("--quick", action="store_true", help="fewer values and steps (< 1 minute)")
+    p.add_argument("--out", required=True, help="output folder for stability.csv and report.md")
+    p.set_defaults(run=_cmd_stability)

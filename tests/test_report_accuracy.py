@@ -1,0 +1,151 @@
+"""`tensormass report accuracy`: a tiny sweep, the user-scene path and the CLI route."""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+
+import pytest
+
+from tensormass.runtime.reports.accuracy import COLUMNS, add_accuracy_command, pareto_front, run_accuracy
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+TINY = {"elements": ["hexahedron", "tetra", "tetra10"], "laws": ["hooke"], "quadratures": {"tetra": ["gauss1"]},
+        "levels": [[6, 1, 1], [12, 2, 2]], "levels_quadratic": [[6, 1, 1]], "reference": [12, 2, 2]}
+
+SCENE = """
+name = "tiny"
+[mesh]
+generate = "bar"
+size = [1.2, 0.2, 0.2]
+cells = [4, 1, 1]
+element = "hexahedron"
+[[material]]
+law = "hooke"
+quadrature = "gauss2"
+E = 1.0e8
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[[probe]]
+name = "tip"
+point = [1.2, 0.1, 0.1]
+[output]
+dir = "should_not_be_written"
+"""
+
+
+def _read(path):
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        return reader.fieldnames, list(reader)
+
+
+def _check_outputs(out):
+    for name in ("error_vs_time.png", "convergence.png"):
+        data = (out / name).read_bytes()
+        assert len(data) > 1000 and data.startswith(PNG), name
+    assert not list(out.glob("*.tmp"))
+    report = (out / "report.md").read_text()
+    assert "Pareto front" in report
+    return report
+
+
+@pytest.fixture(scope="module")
+def builtin(tmp_path_factory):
+    out = tmp_path_factory.mktemp("accuracy")
+    lines = []
+    rows = run_accuracy(out, quick=True, progress=lines.append, _sweep=TINY)
+    return out, rows, lines
+
+
+def test_builtin_results_csv(builtin):
+    out, rows, lines = builtin
+    header, table = _read(out / "results.csv")
+    assert header == COLUMNS
+    assert len(table) == len(rows) == 5        # 2 hexahedron + 2 tetra + 1 tetra10
+    for r in table:
+        for key in COLUMNS[4:]:
+            value = float(r[key])
+            assert math.isfinite(value) and value > 0, (key, r)
+    assert {r["element"] for r in table} == {"hexahedron", "tetra", "tetra10"}
+    assert any("reference" in line for line in lines)
+
+
+def test_builtin_errors_decrease_for_hexahedron(builtin):
+    _, rows, _ = builtin
+    hexa = [r for r in rows if r["element"] == "hexahedron"]
+    assert [r["cells"] for r in hexa] == ["6x1x1", "12x2x2"]
+    assert hexa[1]["error_reference"] < hexa[0]["error_reference"]
+    assert hexa[1]["error_analytic"] < hexa[0]["error_analytic"]
+    assert hexa[1]["dofs"] > hexa[0]["dofs"]
+
+
+def test_builtin_plots_and_report(builtin):
+    out, rows, _ = builtin
+    report = _check_outputs(out)
+    assert "tetra10 / hooke / gauss2 on 12x2x2" in report        # the numerical reference is named
+    assert "Timoshenko" in report
+
+
+def test_pareto_front():
+    rows = [{"time_total": t, "error_reference": e} for t, e in [(1, 0.5), (2, 0.6), (3, 0.1), (0.5, 0.9), (4, 0.1)]]
+    assert pareto_front(rows) == [3, 0, 2]
+
+
+def test_user_scene(tmp_path):
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "out"
+    rows = run_accuracy(out, scene_path=scene, quick=True, progress=lambda *_: None)
+    header, table = _read(out / "results.csv")
+    assert header == COLUMNS
+    assert [r["cells"] for r in table] == ["4x1x1", "8x2x2"]
+    assert rows[-1]["error_reference"] == 0.0                  # the finest run is the reference
+    assert 0 < rows[0]["error_reference"] < 1
+    assert all(math.isfinite(r["error_analytic"]) for r in rows)  # a bar under gravity probed at x = L
+    _check_outputs(out)
+    assert not (tmp_path / "should_not_be_written").exists()
+
+
+def test_user_scene_needs_generated_mesh(tmp_path):
+    from tensormass.runtime.errors import TensormassError
+    scene = tmp_path / "noprobe.toml"
+    scene.write_text(SCENE.split("[[probe]]")[0])
+    with pytest.raises(TensormassError, match="probe"):
+        run_accuracy(tmp_path / "out", scene_path=scene, quick=True, progress=None)
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_route(tmp_path, monkeypatch):
+    parser = argparse.ArgumentParser(prog="tensormass")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_accuracy_command(sub)
+    args = parser.parse_args(["accuracy", "--quick", "--out", str(tmp_path / "o")])
+    assert args.scene is None and args.quick and args.out == str(tmp_path / "o")
+    args = parser.parse_args(["accuracy", "beam.toml", "--out", "d"])
+    assert args.scene == "beam.toml" and not args.quick
+    with pytest.raises(SystemExit):
+        parser.parse_args(["accuracy"])                        # --out is required
+    calls = []
+    import tensormass.runtime.reports.accuracy as acc
+    monkeypatch.setattr(acc, "run_accuracy", lambda out, scene_path=None, quick=False: calls.append((out, scene_path, quick)))
+    assert args.run(args) == 0
+    assert calls == [("d", "beam.toml", False)]
+
+
+def test_report_cli_route(tmp_path):
+    """Through `report accuracy` (runtime/reports/__init__.py), with a real tiny scene."""
+    from tensormass.runtime.reports import add_report_command
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(SCENE)
+    parser = argparse.ArgumentParser(prog="tensormass")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_report_command(sub)
+    args = parser.parse_args(["report", "accuracy", str(scene), "--quick", "--out", str(tmp_path / "r")])
+    assert args.run(args) == 0
+    assert (tmp_path / "r" / "results.csv").exists()
