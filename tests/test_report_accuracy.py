@@ -69,7 +69,8 @@ def test_builtin_results_csv(builtin):
     assert header == COLUMNS
     assert len(table) == len(rows) == 5        # 2 hexahedron + 2 tetra + 1 tetra10
     for r in table:
-        for key in COLUMNS[4:]:
+        assert r["benchmark"] == "cantilever"
+        for key in COLUMNS[6:]:
             value = float(r[key])
             assert math.isfinite(value) and value > 0, (key, r)
     assert {r["element"] for r in table} == {"hexahedron", "tetra", "tetra10"}
@@ -128,7 +129,11 @@ def test_cli_route(tmp_path, monkeypatch):
     args = parser.parse_args(["accuracy", "--quick", "--out", str(tmp_path / "o")])
     assert args.scene is None and args.quick and args.out == str(tmp_path / "o")
     args = parser.parse_args(["accuracy", "beam.toml", "--out", "d"])
-    assert args.scene == "beam.toml" and not args.quick
+    assert args.scene == "beam.toml" and not args.quick and args.benchmark is None
+    args2 = parser.parse_args(["accuracy", "--benchmark", "beam2d", "volume", "--out", "d"])
+    assert args2.benchmark == ["beam2d", "volume"]
+    with pytest.raises(SystemExit):
+        parser.parse_args(["accuracy", "--benchmark", "nope", "--out", "d"])
     with pytest.raises(SystemExit):
         parser.parse_args(["accuracy"])                        # --out is required
     calls = []
@@ -149,3 +154,71 @@ def test_report_cli_route(tmp_path):
     args = parser.parse_args(["report", "accuracy", str(scene), "--quick", "--out", str(tmp_path / "r")])
     assert args.run(args) == 0
     assert (tmp_path / "r" / "results.csv").exists()
+
+
+# -- the other built-in benchmarks, shrunk -----------------------------------------------------------
+SHRUNK = {
+    "beam2d": {"elements": ["triangle", "triangle6"], "levels": [[6, 1], [12, 2]], "claim": False,
+               "reference": [24, 4]},
+    "volume": {"laws": ["hooke"], "nus": [0.0, 0.499], "strains": [0.05], "cells": [2, 2, 2]},
+    "mixed": {"elements": ["mixed", "tetra10"], "levels": [[16, 2, 2]], "reference": [16, 2, 2]},
+    "large_deflection": {"laws": ["hooke", "neohookean"], "levels": [[6, 1, 1]], "reference": [12, 2, 2],
+                         "steps": 3, "load_scales": [0.1, 1.0], "load_cells": [6, 1, 1]},
+}
+
+
+@pytest.fixture(scope="module")
+def others(tmp_path_factory):
+    out = tmp_path_factory.mktemp("benchmarks")
+    rows = run_accuracy(out, quick=True, progress=lambda *_: None, _sweep=SHRUNK,
+                        benchmarks=["beam2d", "volume", "mixed", "large_deflection"])
+    return out, rows
+
+
+def test_benchmarks_rows_and_column(others):
+    out, rows = others
+    header, table = _read(out / "results.csv")
+    assert header == COLUMNS and header[0] == "benchmark"
+    assert [r["benchmark"] for r in table] == [r["benchmark"] for r in rows]
+    counts = {b: sum(r["benchmark"] == b for r in table) for b in SHRUNK}
+    assert counts == {"beam2d": 4, "volume": 2, "mixed": 2, "large_deflection": 2}
+    report = _check_outputs(out)
+    for b in SHRUNK:
+        assert f"## Benchmark `{b}`" in report
+    assert "thesis' FEM" in report and "Hooke's error" in report
+
+
+def test_volume_change(others):
+    _, rows = others
+    vol = {r["case"]: r["value"] for r in rows if r["benchmark"] == "volume"}
+    assert abs(vol["nu=0 compression=5%"] - 5.0) < 0.5
+    assert 0 <= vol["nu=0.499 compression=5%"] < 1.0
+
+
+def test_deformed_volume_of_a_sheared_hexahedron():
+    import numpy as np
+    from tensormass.runtime.mesh import generate_bar
+    from tensormass.runtime.reports.benchmarks import deformed_volume
+    mesh = generate_bar((2.0, 1.0, 1.0), (2, 1, 1), "hexahedron")
+    u = np.zeros_like(mesh.points)
+    assert deformed_volume(mesh, u) == pytest.approx(2.0)
+    u[:, 0] = 0.3 * mesh.points[:, 2]                      # simple shear keeps the volume
+    u[:, 2] = -0.1 * mesh.points[:, 2]                     # 10 % compression
+    assert deformed_volume(mesh, u) == pytest.approx(1.8)
+
+
+def test_beam2d_quadratic_beats_linear(others):
+    _, rows = others
+    beam = {(r["element"], r["cells"]): r for r in rows if r["benchmark"] == "beam2d"}
+    t6, t3 = beam[("triangle6", "6x1")], beam[("triangle", "12x2")]    # 72 dofs each
+    assert t6["dofs"] == t3["dofs"]
+    assert t6["error_reference"] < t3["error_reference"]
+
+
+def test_mixed_and_large_deflection(others):
+    _, rows = others
+    mixed = {r["element"]: r for r in rows if r["benchmark"] == "mixed"}
+    assert mixed["tetra10"]["error_reference"] == 0.0           # it is the reference here
+    assert 0 < mixed["mixed"]["error_reference"] < 0.5
+    large = {r["law"]: r for r in rows if r["benchmark"] == "large_deflection"}
+    assert large["hooke"]["value"] > large["neohookean"]["value"] > 0.15   # metres: a large deflection

@@ -1,8 +1,17 @@
 """`tensormass report accuracy`: what accuracy a setting buys for its run time.
 
-    tensormass report accuracy [SCENE] [--quick] --out DIR
+    tensormass report accuracy [SCENE] [--benchmark NAME [NAME...]] [--quick] --out DIR
 
-Without SCENE, the built-in benchmark of BRIEF section 4 is swept: the thesis cantilever
+Built-in benchmarks (--benchmark, default cantilever; "all" runs every one; see benchmarks.py):
+cantilever (below), beam2d (2D plane-strain beam: triangle / triangle6 / quad, and the thesis'
+claim 200 triangle6 vs 3200 triangles), volume (volume loss of a compressed 5 m cube against the
+thesis' FEM numbers), mixed (the 8 x 1 x 1 m mixed-element bar against hexahedra and tetra10),
+large_deflection (soft cantilever: hooke vs stvk vs neohookean vs stable_neohookean).
+results.csv starts with a `benchmark` column and has a `case` column (volume: nu and compression);
+`value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
+benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
+
+Without SCENE, the cantilever benchmark of BRIEF section 4 is swept: the thesis cantilever
 (1.2 x 0.2 x 0.2 m, rho = 800 kg/m^3, E = 100 MPa, nu = 0.3) clamped at x = 0 and bending
 under its own weight (g = 9.81, tip deflection about 6 mm: small enough for Hooke), over
 element x law x quadrature x resolution.  The tip deflection (-u_z at the centre of the
@@ -47,9 +56,9 @@ from pathlib import Path
 
 from ..errors import TensormassError
 
-__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS"]
+__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
-COLUMNS = ["element", "law", "quadrature", "cells", "dofs", "tip_deflection", "error_analytic",
+COLUMNS = ["benchmark", "element", "law", "quadrature", "cells", "case", "dofs", "value", "error_analytic",
            "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
 
 # -- the built-in benchmark ------------------------------------------------------------------------
@@ -117,9 +126,10 @@ def _measure(scene, trace=True) -> tuple:
 
 def _row(element, law, quadrature, cells, summary, peak, deflection) -> dict:
     t = summary.time
-    return {"element": element, "law": law, "quadrature": quadrature,
-            "cells": "x".join(str(int(c)) for c in cells), "dofs": int(summary.n_free_dofs),
-            "tip_deflection": float(deflection), "error_analytic": float("nan"),
+    return {"benchmark": "cantilever", "element": element, "law": law, "quadrature": quadrature,
+            "cells": "x".join(str(int(c)) for c in cells), "case": "", "main": True,
+            "dofs": int(summary.n_free_dofs),
+            "value": float(deflection), "error_analytic": float("nan"),
             "error_reference": float("nan"), "time_setup": float(t["setup"]),
             "time_assembly": float(t["assembly"]), "time_solve": float(t["linear_solve"]),
             "time_total": float(t["total"]), "peak_memory_mb": float(peak)}
@@ -152,15 +162,15 @@ def _builtin(quick, progress, sweep) -> tuple:
     summary, _ = _measure(cantilever_scene("tetra10", "hooke", "gauss2", ref_cells), trace=False)
     w_ref = -float(summary.probes["tip"][2])
     for r in rows:
-        r["error_analytic"] = abs(r["tip_deflection"] - timo) / timo
-        r["error_reference"] = abs(r["tip_deflection"] - w_ref) / abs(w_ref)
+        r["error_analytic"] = abs(r["value"] - timo) / timo
+        r["error_reference"] = abs(r["value"] - w_ref) / abs(w_ref)
     reference = {
         "numerical": f"tetra10 / hooke / gauss2 on {'x'.join(map(str, ref_cells))} cells "
                      f"({summary.n_free_dofs} free dofs, {summary.time['total']:.2f} s): tip deflection {w_ref:.6g} m",
         "analytic": f"Euler-Bernoulli {eb:.6g} m + Timoshenko shear term (kappa = 5/6) = {timo:.6g} m; "
                     f"the numerical reference differs from it by {abs(w_ref - timo) / timo:.2%}",
         "subject": "cantilever 1.2 x 0.2 x 0.2 m, rho = 800 kg/m^3, E = 100 MPa, nu = 0.3, clamped at x = 0, "
-                   "gravity 9.81 m/s^2 along -z; tip deflection = -u_z at the centre of the free end",
+                   "gravity 9.81 m/s^2 along -z; value = tip deflection = -u_z at the centre of the free end",
     }
     return rows, reference, compile_s
 
@@ -207,7 +217,7 @@ def _user_scene(scene_path, quick, progress, sweep) -> tuple:
         rows.append(_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
         if analytic is not None:
             rows[-1]["error_analytic"] = abs(-u[2] - analytic) / analytic
-        progress(f"  cells {rows[-1]['cells']:<10} dofs {rows[-1]['dofs']:>7}  |u| {rows[-1]['tip_deflection']:.5g} m  "
+        progress(f"  cells {rows[-1]['cells']:<10} dofs {rows[-1]['dofs']:>7}  |u| {rows[-1]['value']:.5g} m  "
                  f"total {summary.time['total']:.3f} s")
     ref = vectors[-1]
     nref = math.sqrt(sum(x * x for x in ref))
@@ -219,8 +229,10 @@ def _user_scene(scene_path, quick, progress, sweep) -> tuple:
                      f"u = [{', '.join(f'{x:.6g}' for x in ref)}] m (its own error_reference is 0)",
         "analytic": (f"Euler-Bernoulli + Timoshenko shear (kappa = 5/6) tip deflection {analytic:.6g} m"
                      if analytic is not None else "none (not a 3D bar under gravity along -z probed at x = L)"),
-        "subject": f"scene {path}; tip_deflection is |u| of probe {probe!r}",
+        "subject": f"scene {path}; value is |u| of probe {probe!r}",
     }
+    for r in rows:
+        r["benchmark"] = "scene"
     return rows, reference, compile_s
 
 
@@ -285,32 +297,59 @@ def _series(rows) -> dict:
     return out
 
 
-def _plot(rows, x, ylabel_title, front=None) -> bytes:
+def _groups(rows) -> dict:
+    """benchmark -> indices of its rows, in order of first appearance."""
+    out = {}
+    for i, r in enumerate(rows):
+        out.setdefault(r.get("benchmark", ""), []).append(i)
+    return out
+
+
+def _fronts(rows) -> dict:
+    """benchmark -> Pareto front (indices into rows) over its main rows with finite errors."""
+    fronts = {}
+    for bench, idx in _groups(rows).items():
+        main = [i for i in idx if rows[i].get("main", True)]
+        fronts[bench] = [main[j] for j in pareto_front([rows[i] for i in main])]
+    return fronts
+
+
+def _plot(rows, x, ylabel_title, fronts=None) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(8, 5.5))
+    groups = [(b, [i for i in idx if rows[i].get("main", True)]) for b, idx in _groups(rows).items()]
+    groups = [(b, idx) for b, idx in groups
+              if any(math.isfinite(rows[i]["error_reference"]) and rows[i]["error_reference"] > 0 for i in idx)]
+    groups = groups or [("", [])]
+    fig = Figure(figsize=(8 * min(len(groups), 2), 5.5 * ((len(groups) + 1) // 2)))
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
     markers = "osD^vP*Xh<>p"
-    for k, (label, idx) in enumerate(_series(rows).items()):
-        pts = [(rows[i][x], rows[i]["error_reference"]) for i in idx
-               if rows[i][x] > 0 and rows[i]["error_reference"] > 0 and math.isfinite(rows[i]["error_reference"])]
-        if pts:
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=markers[k % len(markers)], label=label)
-    if front:
+    cols = min(len(groups), 2)
+    for g, (bench, idx) in enumerate(groups):
+        ax = fig.add_subplot((len(groups) + 1) // 2, cols, g + 1)
+        sub = [rows[i] for i in idx]
+        for k, (label, sidx) in enumerate(_series(sub).items()):
+            sidx = sorted(sidx, key=lambda i: sub[i]["dofs"])          # lines follow refinement
+            pts = [(sub[i][x], sub[i]["error_reference"]) for i in sidx
+                   if sub[i][x] > 0 and sub[i]["error_reference"] > 0 and math.isfinite(sub[i]["error_reference"])]
+            if pts:
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=markers[k % len(markers)], label=label)
+        front = (fronts or {}).get(bench, [])
         pts = [(rows[i][x], rows[i]["error_reference"]) for i in front
                if rows[i][x] > 0 and rows[i]["error_reference"] > 0]
         if pts:
             ax.step([p[0] for p in pts], [p[1] for p in pts], where="post", color="black", lw=1, ls="--")
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=160, facecolors="none", edgecolors="black",
                        linewidths=1.5, label="Pareto front", zorder=5)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(ylabel_title[0])
-    ax.set_ylabel("relative error against the numerical reference")
-    ax.set_title(ylabel_title[1])
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+        if idx:
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+        ax.set_xlabel(ylabel_title[0])
+        ax.set_ylabel("relative error against the numerical reference")
+        ax.set_title(f"{ylabel_title[1]}: {bench}" if bench else ylabel_title[1])
+        ax.grid(True, which="both", alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
@@ -321,96 +360,157 @@ def _fmt(v, spec=".3g") -> str:
     return "n/a" if isinstance(v, float) and not math.isfinite(v) else format(v, spec)
 
 
-def _report_md(rows, front, reference, compile_s, quick, scene_path, elapsed) -> str:
-    mode = "quick" if quick else "full"
-    what = f"scene `{scene_path}`" if scene_path else "built-in cantilever benchmark"
-    lines = [f"# Accuracy report ({what}, {mode} sweep)", "",
-             f"{len(rows)} runs in {elapsed:.1f} s.", "",
-             "## References", "",
+def _section(bench, rows, idx, front, reference, notes) -> list:
+    lines = [f"## Benchmark `{bench}`", "",
              f"- Subject: {reference['subject']}.",
-             f"- `error_reference` uses the numerical reference: {reference['numerical']}.",
-             f"- `error_analytic` uses the analytic reference: {reference['analytic']}.", "",
-             "## Pareto front (time_total against error_reference)", "",
-             "Settings that no other run beats in both total run time and error against the numerical reference:", ""]
+             f"- Reference (`error_reference`): {reference['numerical']}.",
+             f"- Analytic / published reference (`error_analytic`): {reference['analytic']}.", ""]
+    lines += list(notes)
+    lines += [f"### Pareto front of `{bench}` (time_total against error_reference)", "",
+              "Settings that no other run of this benchmark beats in both total run time and error against "
+              "the numerical reference:", ""]
     for i in front:
         r = rows[i]
         lines.append(f"- {r['element']} / {r['law']} / {r['quadrature']}, cells {r['cells']} "
                      f"({r['dofs']} dofs): error {_fmt(r['error_reference'])} in {r['time_total']:.3g} s")
     if not front:
-        lines.append("- (none: no finite errors)")
-    lines += ["", "## All runs", "",
-              "| element | law | quadrature | cells | dofs | tip deflection [m] | error analytic | error reference "
+        lines.append("- (none: no finite errors against a numerical reference)")
+    lines += ["", f"### All runs of `{bench}`", "",
+              "| element | law | quadrature | cells | case | dofs | value | error analytic | error reference "
               "| setup [s] | assembly [s] | solve [s] | total [s] | peak memory [MB] | Pareto |",
-              "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+              "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     on = set(front)
-    for i, r in enumerate(rows):
-        lines.append(f"| {r['element']} | {r['law']} | {r['quadrature']} | {r['cells']} | {r['dofs']} | "
-                     f"{r['tip_deflection']:.5g} | {_fmt(r['error_analytic'])} | {_fmt(r['error_reference'])} | "
+    for i in idx:
+        r = rows[i]
+        lines.append(f"| {r['element']} | {r['law']} | {r['quadrature']} | {r['cells']} | {r['case']} | {r['dofs']} | "
+                     f"{r['value']:.5g} | {_fmt(r['error_analytic'])} | {_fmt(r['error_reference'])} | "
                      f"{r['time_setup']:.3g} | {r['time_assembly']:.3g} | {r['time_solve']:.3g} | "
                      f"{r['time_total']:.3g} | {_fmt(r['peak_memory_mb'], '.1f')} | {'yes' if i in on else ''} |")
-    lines += ["", "## What the columns measure", "",
+    lines.append("")
+    return lines
+
+
+def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
+    mode = "quick" if quick else "full"
+    what = (f"scene `{scene_path}`" if scene_path else
+            "built-in benchmark" + ("s " if len(results) > 1 else " ") + ", ".join(f"`{b}`" for b in results))
+    lines = [f"# Accuracy report ({what}, {mode} sweep)", "",
+             f"{len(rows)} runs in {elapsed:.1f} s. Each benchmark has its own references and Pareto front "
+             "(Pareto front = settings no other run of the same benchmark beats in both run time and error).", ""]
+    groups = _groups(rows)
+    compile_s = {}
+    for bench, res in results.items():
+        idx = groups.get("scene" if scene_path else bench, [])
+        lines += _section(bench if not scene_path else "scene", rows, idx, fronts.get("scene" if scene_path else bench, []),
+                          res["reference"], res.get("notes", []))
+        for key, t in res["compile_s"].items():
+            compile_s[(bench,) + tuple(key)] = t
+    lines += ["## What the columns measure", "",
+              "- `benchmark`: which benchmark; `case`: the load case within it (volume: nu and compression); "
+              "`value`: the benchmark's measured quantity (tip deflection in m; volume: relative volume loss in %; "
+              "user scene: |u| of the first probe).",
               "- Times are from the run summary: `time_setup` = model build, kernel loading and assembly pattern "
-              "(each combination was warmed up once on its coarsest mesh first, so one-off compilation is "
+              "(each combination was warmed up once on a coarse mesh first, so one-off compilation is "
               "excluded), `time_assembly` = assembly of forces/stiffness, `time_solve` = linear solves, "
               "`time_total` = setup + steps.",
               "- `peak_memory_mb` = tracemalloc peak while building and running the model: memory allocated "
               "through Python and numpy (arrays, sparse matrices); memory that compiled libraries allocate "
               "themselves (sparse factorisation, numba runtime) is not included.",
               "- `dofs` = free (unconstrained) degrees of freedom.", "",
-              "Warm-up runs (first load or compilation of each combination's kernels, coarsest mesh):", ""]
-    for (e, l, q), s in compile_s.items():
-        lines.append(f"- {e} / {l} / {q}: {s:.2f} s")
-    lines += ["", "Plots: `error_vs_time.png` (error against total time, Pareto front circled), "
-              "`convergence.png` (error against free dofs).", ""]
+              "Warm-up runs (first load or compilation of each combination's kernels, coarse mesh):", ""]
+    for (b, e, l, q), t in compile_s.items():
+        lines.append(f"- {b}: {e} / {l} / {q}: {t:.2f} s")
+    lines += ["", "Plots: `error_vs_time.png` (error against total time, one panel per benchmark with a numerical "
+              "reference, Pareto front circled), `convergence.png` (error against free dofs).", ""]
     return "\n".join(lines)
 
 
 # -- entry points ----------------------------------------------------------------------------------
-def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, _sweep: dict | None = None) -> list:
+BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection")
+
+
+def _resolve(benchmarks) -> list:
+    if not benchmarks:
+        return ["cantilever"]
+    if isinstance(benchmarks, str):
+        benchmarks = [benchmarks]
+    names = []
+    for b in benchmarks:
+        if b == "all":
+            names += list(BENCHMARK_NAMES)
+        elif b in BENCHMARK_NAMES:
+            names.append(b)
+        else:
+            raise TensormassError(f"unknown benchmark {b!r}; choose from {', '.join(BENCHMARK_NAMES)} or all")
+    return list(dict.fromkeys(names))
+
+
+def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, _sweep: dict | None = None,
+                 benchmarks=None) -> list:
     """Run the sweep and write results.csv, error_vs_time.png, convergence.png and report.md to out_dir.
 
-    _sweep (tests): overrides of the sweep (built-in: elements, laws, quadratures, levels,
-    levels_quadratic, reference; user scene: factors).  Returns the result rows (dicts, COLUMNS).
+    benchmarks: names from BENCHMARK_NAMES or "all" (default: cantilever); ignored with scene_path.
+    _sweep (tests): overrides of the sweep (cantilever: elements, laws, quadratures, levels,
+    levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
+    name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
+    from .benchmarks import BENCHMARKS
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise TensormassError(f"--out {out}: exists and is not a folder")
+    names = _resolve(benchmarks) if scene_path is None else []
     start = time.perf_counter()
-    if scene_path is None:
-        rows, reference, compile_s = _builtin(quick, progress, _sweep)
-    else:
-        rows, reference, compile_s = _user_scene(scene_path, quick, progress, _sweep)
+    rows, results = [], {}
+    if scene_path is not None:
+        r, reference, compile_s = _user_scene(scene_path, quick, progress, _sweep)
+        rows += r
+        results["scene"] = {"reference": reference, "compile_s": compile_s, "notes": []}
+    for name in names:
+        if name == "cantilever":
+            sweep = {k: v for k, v in (_sweep or {}).items() if k not in BENCHMARKS}
+            r, reference, compile_s = _builtin(quick, progress, sweep)
+            results[name] = {"reference": reference, "compile_s": compile_s, "notes": []}
+        else:
+            res = BENCHMARKS[name](quick, progress, (_sweep or {}).get(name))
+            r = res["rows"]
+            results[name] = res
+        rows += r
     elapsed = time.perf_counter() - start
-    front = pareto_front(rows)
+    fronts = _fronts(rows)
     out.mkdir(parents=True, exist_ok=True)
     _atomic_write(out / "results.csv", _csv_bytes(rows))
     _atomic_write(out / "error_vs_time.png",
-                  _plot(rows, "time_total", ("total run time [s]", "Error against run time"), front))
+                  _plot(rows, "time_total", ("total run time [s]", "Error against run time"), fronts))
     _atomic_write(out / "convergence.png",
                   _plot(rows, "dofs", ("free degrees of freedom", "Convergence under mesh refinement")))
-    _atomic_write(out / "report.md",
-                  _report_md(rows, front, reference, compile_s, quick, scene_path, elapsed).encode("utf-8"))
-    progress("Pareto front (total time vs error against the numerical reference):")
-    for i in front:
-        r = rows[i]
-        progress(f"  {r['element']} / {r['law']} / {r['quadrature']} cells {r['cells']}: "
-                 f"error {_fmt(r['error_reference'])}, {r['time_total']:.3g} s")
+    _atomic_write(out / "report.md", _report_md(rows, fronts, results, quick, scene_path, elapsed).encode("utf-8"))
+    for bench, front in fronts.items():
+        if not front:
+            continue
+        progress(f"Pareto front of {bench} (total time vs error against the numerical reference):")
+        for i in front:
+            r = rows[i]
+            progress(f"  {r['element']} / {r['law']} / {r['quadrature']} cells {r['cells']}: "
+                     f"error {_fmt(r['error_reference'])}, {r['time_total']:.3g} s")
     progress(f"wrote {out / 'results.csv'}, error_vs_time.png, convergence.png, report.md ({elapsed:.1f} s)")
     return rows
 
 
 def cmd_accuracy(args) -> int:
-    run_accuracy(args.out, scene_path=args.scene, quick=args.quick)
+    kwargs = {"benchmarks": args.benchmark} if getattr(args, "benchmark", None) else {}
+    run_accuracy(args.out, scene_path=args.scene, quick=args.quick, **kwargs)
     return 0
 
 
 def add_accuracy_command(subparsers) -> None:
-    """Add `accuracy [SCENE] [--quick] --out DIR` to an argparse subparsers object."""
+    """Add `accuracy [SCENE] [--benchmark NAME...] [--quick] --out DIR` to an argparse subparsers object."""
     p = subparsers.add_parser("accuracy", help="sweep element x law x quadrature x resolution: error against "
                                                "run time (results.csv, plots, report.md)")
     p.add_argument("scene", nargs="?", default=None,
                    help="scene file (.toml, generated mesh) to refine; default: the built-in cantilever benchmark")
+    p.add_argument("--benchmark", nargs="+", metavar="NAME", choices=BENCHMARK_NAMES + ("all",), default=None,
+                   help="built-in benchmarks to run: " + ", ".join(BENCHMARK_NAMES) + " or all (default: cantilever)")
     p.add_argument("--quick", action="store_true", help="a small sweep (well under 2 minutes)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(run=cmd_accuracy)
