@@ -222,3 +222,93 @@ def test_mixed_and_large_deflection(others):
     assert 0 < mixed["mixed"]["error_reference"] < 0.5
     large = {r["law"]: r for r in rows if r["benchmark"] == "large_deflection"}
     assert large["hooke"]["value"] > large["neohookean"]["value"] > 0.15   # metres: a large deflection
+
+
+# -- shear and torsion of the 5 m cube, shrunk ---------------------------------------------------------
+CUBE_SHRUNK = {"elements": ["hexahedron", "tetra10"], "levels": [[2, 2, 2], [4, 4, 4], [8, 8, 8]],
+               "levels_quadratic": [[1, 1, 1], [2, 2, 2]]}
+
+
+@pytest.fixture(scope="module")
+def cube(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cube")
+    rows = run_accuracy(out, quick=True, progress=lambda *_: None, benchmarks=["shear", "torsion"],
+                        _sweep={"shear": CUBE_SHRUNK, "torsion": CUBE_SHRUNK})
+    return out, rows
+
+
+@pytest.mark.parametrize("kind", ["shear", "torsion"])
+def test_cube_against_thesis_formula_and_convergence(cube, kind):
+    from tensormass.runtime.reports.benchmarks import shear_analytic, torsion_analytic
+    out, rows = cube
+    analytic = shear_analytic() if kind == "shear" else torsion_analytic()
+    mine = [r for r in rows if r["benchmark"] == kind]
+    assert [(r["element"], r["cells"]) for r in mine] == [
+        ("hexahedron", "2x2x2"), ("hexahedron", "4x4x4"), ("hexahedron", "8x8x8"),
+        ("tetra10", "1x1x1"), ("tetra10", "2x2x2")]
+    for r in mine:
+        assert 0.5 < r["value"] / analytic < 2.0, r           # the thesis formula is an estimate: loose band
+        assert r["error_analytic"] == pytest.approx(abs(r["value"] / analytic - 1.0))
+    hexa = [r["value"] for r in mine if r["element"] == "hexahedron"]
+    assert abs(hexa[2] - hexa[1]) < abs(hexa[1] - hexa[0])   # converging: the finest two agree better
+    assert abs(hexa[2] - hexa[1]) < 0.1 * analytic            # the finest two agree to 10 %
+    assert hexa[2] < hexa[0]                                  # refinement softens the response
+    ref = [r for r in mine if r["error_reference"] == 0.0]
+    assert [(r["element"], r["cells"]) for r in ref] == [("tetra10", "2x2x2")]   # the finest tetra10 run
+    report = (out / "report.md").read_text()
+    assert f"## Benchmark `{kind}`" in report and "/ thesis formula" in report
+
+
+def test_cube_reactions_sign_and_linearity():
+    """Reactions push back along the prescribed motion; the torque is ~linear in a small angle."""
+    import numpy as np
+    from tensormass.runtime.reports.benchmarks import cube_run
+    s, _, f = cube_run("shear", "hexahedron", [2, 2, 2], trace=False)
+    _, _, t = cube_run("torsion", "hexahedron", [2, 2, 2], theta=0.02, trace=False)
+    _, _, t1 = cube_run("torsion", "hexahedron", [2, 2, 2], theta=0.01, trace=False)
+    assert f > 0 and t > 0
+    assert t == pytest.approx(2 * t1, rel=1e-3)      # exact rotation: cos(theta) - 1 is O(theta^2)
+    assert np.isfinite(s.time["total"])
+
+
+# -- user-scene sweep over listed settings ---------------------------------------------------------------
+def test_user_scene_settings_sweep(tmp_path):
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "out"
+    rows = run_accuracy(out, scene_path=scene, quick=True, progress=lambda *_: None,
+                        elements=["hexahedron", "tetra10"], laws=["hooke", "stvk"], quadratures=["gauss2", "exact"],
+                        levels=2)
+    header, table = _read(out / "results.csv")
+    assert header == COLUMNS and len(table) == len(rows)
+    combos = [(r["element"], r["law"], r["quadrature"], r["cells"]) for r in table]
+    expected = [(e, l, q, c) for e in ("hexahedron", "tetra10") for l in ("hooke", "stvk")
+                for q in ("gauss2", "exact") if not (e == "hexahedron" and q == "exact")
+                for c in ("4x1x1", "8x2x2")]
+    assert combos == expected                                  # one row per valid combination x level
+    ref = [r for r in rows if r["error_reference"] == 0.0]
+    assert {(r["element"], r["quadrature"], r["cells"]) for r in ref} >= {("tetra10", "exact", "8x2x2")}
+    assert all(math.isfinite(r["error_reference"]) for r in rows)
+    report = _check_outputs(out)
+    assert "skipped hexahedron / hooke / exact" in report and "skipped hexahedron / stvk / exact" in report
+    assert "finest run of tetra10 / hooke / exact" in report
+
+
+def test_user_scene_settings_cli(tmp_path, monkeypatch):
+    from tensormass.runtime.errors import TensormassError
+    parser = argparse.ArgumentParser(prog="tensormass")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_accuracy_command(sub)
+    args = parser.parse_args(["accuracy", "s.toml", "--elements", "hexahedron", "tetra10", "--laws", "hooke", "stvk",
+                              "--quadratures", "gauss1", "gauss2", "--levels", "3", "--out", "d"])
+    calls = []
+    import tensormass.runtime.reports.accuracy as acc
+    monkeypatch.setattr(acc, "run_accuracy", lambda out, **kw: calls.append((out, kw)))
+    assert args.run(args) == 0
+    assert calls == [("d", {"scene_path": "s.toml", "quick": False, "elements": ["hexahedron", "tetra10"],
+                            "laws": ["hooke", "stvk"], "quadratures": ["gauss1", "gauss2"], "levels": 3})]
+    monkeypatch.undo()
+    with pytest.raises(TensormassError, match="SCENE"):
+        run_accuracy(tmp_path / "o", elements=["tetra"], progress=None)
+    assert parser.parse_args(["accuracy", "--benchmark", "shear", "torsion", "--out", "d"]).benchmark == [
+        "shear", "torsion"]

@@ -6,7 +6,9 @@ Built-in benchmarks (--benchmark, default cantilever; "all" runs every one; see 
 cantilever (below), beam2d (2D plane-strain beam: triangle / triangle6 / quad, and the thesis'
 claim 200 triangle6 vs 3200 triangles), volume (volume loss of a compressed 5 m cube against the
 thesis' FEM numbers), mixed (the 8 x 1 x 1 m mixed-element bar against hexahedra and tetra10),
-large_deflection (soft cantilever: hooke vs stvk vs neohookean vs stable_neohookean).
+large_deflection (soft cantilever: hooke vs stvk vs neohookean vs stable_neohookean), shear and
+torsion (the thesis' ch. 7 5 m cube: reaction force / torque on the top face against the thesis'
+formulas and the finest tetra10 run).
 results.csv starts with a `benchmark` column and has a `case` column (volume: nu and compression);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
 benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
@@ -24,10 +26,15 @@ free end, x = L) is compared with
 * error_reference: a converged numerical reference, a dedicated tetra10 / hooke / gauss2
   run on a mesh finer than (full mode) or as fine as the finest of (quick mode) the sweep.
 
-With SCENE (a generated mesh), mesh.cells is scaled by 1, 2 (and 4 unless --quick); the
-finest run is the reference for the first probe's displacement (error_reference =
-|u - u_ref| / |u_ref|, 0 for the reference itself); error_analytic is filled in only when
-the scene is a 3D generated bar under gravity along -z with its first probe at x = L.
+With SCENE (a generated mesh), every combination of --elements x --laws x --quadratures (each
+optional, default the scene's own; laws and quadratures apply to every material) is run with
+mesh.cells scaled by 1, 2, 4, ... (--levels, default 3, 2 with --quick); combinations the
+catalogue lacks (e.g. a quadrature an element does not have) are skipped with a note in
+report.md.  The reference for the first probe's displacement is the finest run of the most
+accurate-looking combination (quadratic element, then highest quadrature order, then most
+dofs; ties: the first listed), error_reference = |u - u_ref| / |u_ref| (0 for the reference
+itself); error_analytic is filled in only when the scene is a 3D generated bar under gravity
+along -z with its first probe at x = L.
 
 Timings come from the run Summary: time_setup (model build, kernel loading, assembly
 pattern; every combination is warmed up once on its coarsest mesh before it is measured, so
@@ -175,8 +182,25 @@ def _builtin(quick, progress, sweep) -> tuple:
     return rows, reference, compile_s
 
 
-def _user_scene(scene_path, quick, progress, sweep) -> tuple:
-    from ..scene import Scene
+def _settings(data, element, law, quad):
+    """A copy of the scene dict with the mesh element and every material's law / quadrature replaced
+    (None keeps the scene's own)."""
+    d = copy.deepcopy(data)
+    d.pop("output", None)
+    if element is not None:
+        d["mesh"]["element"] = element
+    for m in d.get("material", []) if isinstance(d.get("material"), list) else []:
+        if law is not None:
+            m["law"] = law
+        if quad is not None:
+            m["quadrature"] = quad
+    return d
+
+
+def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
+    """Sweep a scene over element x law x quadrature (settings: elements / laws / quadratures lists,
+    None = the scene's own) x resolution (cells x 1, 2, 4, ...; settings["levels"] of them)."""
+    from ..scene import Scene, SceneError
     path = Path(scene_path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -184,56 +208,99 @@ def _user_scene(scene_path, quick, progress, sweep) -> tuple:
         raise TensormassError(f"scene file not found: {path}") from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise TensormassError(f"cannot read scene file {path}: {exc}") from None
-    base = Scene.from_dict({**data, "name": data.get("name", path.stem)}, base_dir=path.parent)
+    data = {**data, "name": data.get("name", path.stem)}
+    base = Scene.from_dict(data, base_dir=path.parent)
     if base.mesh.file is not None or base.mesh.generate is None:
         raise TensormassError(f"{path}: the accuracy sweep scales mesh.cells, so the scene needs a generated mesh "
                               "([mesh] generate = \"bar\"), not a mesh file")
     if not base.probes:
         raise TensormassError(f"{path}: the accuracy sweep compares the first probe's displacement; add a [[probe]]")
-    factors = (sweep or {}).get("factors", [1, 2] if quick else [1, 2, 4])
+    settings = settings or {}
+    levels = settings.get("levels")
+    if levels is not None and (not isinstance(levels, int) or levels < 1):
+        raise TensormassError(f"--levels must be a positive integer, got {levels!r}")
+    factors = (sweep or {}).get("factors") or [2 ** i for i in range(levels if levels else (2 if quick else 3))]
     probe = base.probes[0].name
-    element = base.mesh.element
-    law = "+".join(dict.fromkeys(m.law for m in base.materials))
-    quad = "+".join(dict.fromkeys(m.quadrature for m in base.materials))
-    analytic = _scene_analytic(base)
-    progress(f"accuracy: {path} ({element}, {law}, {quad}), cells x {', '.join(map(str, factors))}; "
-             f"reference: the finest run, probe {probe!r}")
-    rows, vectors, compile_s = [], [], {}
-    for i, k in enumerate(factors):
-        d = copy.deepcopy(data)
-        d["name"] = data.get("name", path.stem)
-        d.pop("output", None)
-        cells = [int(c) * int(k) for c in base.mesh.cells]
-        d["mesh"]["cells"] = cells
-        scene = Scene.from_dict(d, base_dir=path.parent)
-        if i == 0:
+    elements = list(dict.fromkeys(settings.get("elements") or [None]))
+    laws_ = list(dict.fromkeys(settings.get("laws") or [None]))
+    quads = list(dict.fromkeys(settings.get("quadratures") or [None]))
+    combos = [(e, l, q) for e in elements for l in laws_ for q in quads]
+    progress(f"accuracy: {path}, {len(combos)} element/law/quadrature combination(s), cells x "
+             f"{', '.join(map(str, factors))}; reference: the finest run of the most accurate-looking combination, "
+             f"probe {probe!r}")
+    rows, vectors, compile_s, notes, finest = [], [], {}, [], []
+    for e, l, q in combos:
+        d0 = _settings(data, e, l, q)
+        try:
+            scene0 = Scene.from_dict(d0, base_dir=path.parent)
+        except SceneError as exc:
+            own = (base.mesh.element, "+".join(dict.fromkeys(m.law for m in base.materials)),
+                   "+".join(dict.fromkeys(m.quadrature for m in base.materials)))
+            label = " / ".join(x if x is not None else o for x, o in zip((e, l, q), own))
+            notes.append(f"- skipped {label}: {exc}")
+            progress(f"  skipped {label}: {exc}")
+            continue
+        element = scene0.mesh.element
+        law = "+".join(dict.fromkeys(m.law for m in scene0.materials))
+        quad = "+".join(dict.fromkeys(m.quadrature for m in scene0.materials))
+        analytic = _scene_analytic(scene0)
+        n0 = len(rows)
+        try:
             t0 = time.perf_counter()
-            _measure(scene, trace=False)
+            _measure(scene0, trace=False)                              # warm-up: compile / load kernels
             compile_s[(element, law, quad)] = time.perf_counter() - t0
-            scene = Scene.from_dict(copy.deepcopy(d), base_dir=path.parent)
-        summary, peak = _measure(scene)
-        u = [float(x) for x in summary.probes[probe]]
-        vectors.append(u)
-        rows.append(_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
-        if analytic is not None:
-            rows[-1]["error_analytic"] = abs(-u[2] - analytic) / analytic
-        progress(f"  cells {rows[-1]['cells']:<10} dofs {rows[-1]['dofs']:>7}  |u| {rows[-1]['value']:.5g} m  "
-                 f"total {summary.time['total']:.3f} s")
-    ref = vectors[-1]
+            for k in factors:
+                d = copy.deepcopy(d0)
+                cells = [int(c) * int(k) for c in base.mesh.cells]
+                d["mesh"]["cells"] = cells
+                summary, peak = _measure(Scene.from_dict(d, base_dir=path.parent))
+                u = [float(x) for x in summary.probes[probe]]
+                vectors.append(u)
+                rows.append(_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
+                if analytic is not None:
+                    rows[-1]["error_analytic"] = abs(-u[2] - analytic) / analytic
+                progress(f"  {element:<10} {law:<5} {quad:<6} cells {rows[-1]['cells']:<10} "
+                         f"dofs {rows[-1]['dofs']:>7}  |u| {rows[-1]['value']:.5g} m  "
+                         f"total {summary.time['total']:.3f} s")
+        except Exception as exc:  # noqa: BLE001 - a failed setting is a result, reported
+            notes.append(f"- failed {element} / {law} / {quad}: {type(exc).__name__}: {exc}"
+                         + (" (coarser levels kept)" if len(rows) > n0 else ""))
+            progress(f"  {element} / {law} / {quad} FAILED: {exc}")
+        if len(rows) > n0:
+            finest.append(len(rows) - 1)
+    if not rows:
+        raise TensormassError(f"{path}: no valid element / law / quadrature combination to sweep:\n"
+                              + "\n".join(notes))
+    # reference: quadratic elements first, then the highest quadrature order, then the most free dofs;
+    # ties go to the first listed combination
+    def _rank(i):
+        r = rows[i]
+        order = max((99 if part == "exact" else int("".join(c for c in part if c.isdigit()) or 0)
+                     for part in r["quadrature"].split("+")), default=0)
+        return (r["element"] in QUADRATIC, order, r["dofs"])
+    ref_i = max(finest, key=_rank)           # max() keeps the first of equal keys
+    ref = vectors[ref_i]
     nref = math.sqrt(sum(x * x for x in ref))
     for r, u in zip(rows, vectors):
         diff = math.sqrt(sum((a - b) ** 2 for a, b in zip(u, ref)))
         r["error_reference"] = diff / nref if nref > 0 else float("nan")
+    rr = rows[ref_i]
     reference = {
-        "numerical": f"the finest run ({rows[-1]['cells']} cells, {rows[-1]['dofs']} free dofs): probe {probe!r} "
+        "numerical": f"the finest run of {rr['element']} / {rr['law']} / {rr['quadrature']} ({rr['cells']} cells, "
+                     f"{rr['dofs']} free dofs; chosen as the most accurate-looking combination: quadratic element, "
+                     f"then highest quadrature, then most dofs): probe {probe!r} "
                      f"u = [{', '.join(f'{x:.6g}' for x in ref)}] m (its own error_reference is 0)",
-        "analytic": (f"Euler-Bernoulli + Timoshenko shear (kappa = 5/6) tip deflection {analytic:.6g} m"
-                     if analytic is not None else "none (not a 3D bar under gravity along -z probed at x = L)"),
+        "analytic": ("Euler-Bernoulli + Timoshenko shear (kappa = 5/6) tip deflection, where the scene is a 3D bar "
+                     "under gravity along -z probed at x = L"
+                     if any(math.isfinite(r["error_analytic"]) for r in rows)
+                     else "none (not a 3D bar under gravity along -z probed at x = L)"),
         "subject": f"scene {path}; value is |u| of probe {probe!r}",
     }
     for r in rows:
         r["benchmark"] = "scene"
-    return rows, reference, compile_s
+    if notes:
+        notes = ["### Combinations skipped (not in the catalogue for this mesh) or failed", ""] + notes + [""]
+    return rows, reference, compile_s, notes
 
 
 def _scene_analytic(scene):
@@ -408,6 +475,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
     lines += ["## What the columns measure", "",
               "- `benchmark`: which benchmark; `case`: the load case within it (volume: nu and compression); "
               "`value`: the benchmark's measured quantity (tip deflection in m; volume: relative volume loss in %; "
+              "shear: lateral reaction force on the top face in N; torsion: torque on the top face in N m; "
               "user scene: |u| of the first probe).",
               "- Times are from the run summary: `time_setup` = model build, kernel loading and assembly pattern "
               "(each combination was warmed up once on a coarse mesh first, so one-off compilation is "
@@ -426,7 +494,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 
 # -- entry points ----------------------------------------------------------------------------------
-BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection")
+BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion")
 
 
 def _resolve(benchmarks) -> list:
@@ -446,10 +514,12 @@ def _resolve(benchmarks) -> list:
 
 
 def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, _sweep: dict | None = None,
-                 benchmarks=None) -> list:
+                 benchmarks=None, elements=None, laws=None, quadratures=None, levels=None) -> list:
     """Run the sweep and write results.csv, error_vs_time.png, convergence.png and report.md to out_dir.
 
     benchmarks: names from BENCHMARK_NAMES or "all" (default: cantilever); ignored with scene_path.
+    elements / laws / quadratures (lists) and levels (int): the user-scene sweep (SCENE only); each
+    None keeps the scene's own setting, levels defaults to 3 (2 with quick).
     _sweep (tests): overrides of the sweep (cantilever: elements, laws, quadratures, levels,
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
@@ -459,13 +529,16 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise TensormassError(f"--out {out}: exists and is not a folder")
+    settings = {"elements": elements, "laws": laws, "quadratures": quadratures, "levels": levels}
+    if scene_path is None and any(v is not None for v in settings.values()):
+        raise TensormassError("--elements / --laws / --quadratures / --levels sweep a SCENE; give a scene file")
     names = _resolve(benchmarks) if scene_path is None else []
     start = time.perf_counter()
     rows, results = [], {}
     if scene_path is not None:
-        r, reference, compile_s = _user_scene(scene_path, quick, progress, _sweep)
+        r, reference, compile_s, notes = _user_scene(scene_path, quick, progress, _sweep, settings)
         rows += r
-        results["scene"] = {"reference": reference, "compile_s": compile_s, "notes": []}
+        results["scene"] = {"reference": reference, "compile_s": compile_s, "notes": notes}
     for name in names:
         if name == "cantilever":
             sweep = {k: v for k, v in (_sweep or {}).items() if k not in BENCHMARKS}
@@ -499,6 +572,9 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
 
 def cmd_accuracy(args) -> int:
     kwargs = {"benchmarks": args.benchmark} if getattr(args, "benchmark", None) else {}
+    for key in ("elements", "laws", "quadratures", "levels"):
+        if getattr(args, key, None) is not None:
+            kwargs[key] = getattr(args, key)
     run_accuracy(args.out, scene_path=args.scene, quick=args.quick, **kwargs)
     return 0
 
@@ -511,6 +587,14 @@ def add_accuracy_command(subparsers) -> None:
                    help="scene file (.toml, generated mesh) to refine; default: the built-in cantilever benchmark")
     p.add_argument("--benchmark", nargs="+", metavar="NAME", choices=BENCHMARK_NAMES + ("all",), default=None,
                    help="built-in benchmarks to run: " + ", ".join(BENCHMARK_NAMES) + " or all (default: cantilever)")
+    p.add_argument("--elements", nargs="+", metavar="ELEMENT", default=None,
+                   help="SCENE sweep: mesh elements to try (default: the scene's own)")
+    p.add_argument("--laws", nargs="+", metavar="LAW", default=None,
+                   help="SCENE sweep: material laws to try, applied to every material (default: the scene's own)")
+    p.add_argument("--quadratures", nargs="+", metavar="QUAD", default=None,
+                   help="SCENE sweep: quadratures to try, applied to every material (default: the scene's own)")
+    p.add_argument("--levels", type=int, metavar="N", default=None,
+                   help="SCENE sweep: resolution levels, cells x 1, 2, 4, ... (default 3, 2 with --quick)")
     p.add_argument("--quick", action="store_true", help="a small sweep (well under 2 minutes)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(run=cmd_accuracy)
