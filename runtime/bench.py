@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import TensormassError
+from .output import write_json_atomic
 
 DEFAULT_ENTRIES = tuple(f"{element}_{law}_{quadrature}"
                         for element, quadrature in (("tetra", "gauss1"), ("hexahedron", "gauss2"))
@@ -329,20 +330,6 @@ def run_kernel_bench(n_elements=100_000, entries=None, backends=("c", "numba"), 
     if json_path:
         write_json_atomic(json_path, report)
     return report
-
-
-def write_json_atomic(path, data) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(data, handle, indent=2, sort_keys=False)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 # -- report -------------------------------------------------------------------------------------

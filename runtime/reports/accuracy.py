@@ -54,14 +54,13 @@ import copy
 import csv
 import io
 import math
-import os
-import tempfile
 import time
 import tomllib
 import tracemalloc
 from pathlib import Path
 
 from ..errors import TensormassError
+from ..output import write_bytes_atomic
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
@@ -334,20 +333,6 @@ def pareto_front(rows, x="time_total", y="error_reference") -> list:
     return sorted(front, key=lambda i: rows[i][x])
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
 def _csv_bytes(rows) -> bytes:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
@@ -552,12 +537,12 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     elapsed = time.perf_counter() - start
     fronts = _fronts(rows)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / "results.csv", _csv_bytes(rows))
-    _atomic_write(out / "error_vs_time.png",
+    write_bytes_atomic(out / "results.csv", _csv_bytes(rows))
+    write_bytes_atomic(out / "error_vs_time.png",
                   _plot(rows, "time_total", ("total run time [s]", "Error against run time"), fronts))
-    _atomic_write(out / "convergence.png",
+    write_bytes_atomic(out / "convergence.png",
                   _plot(rows, "dofs", ("free degrees of freedom", "Convergence under mesh refinement")))
-    _atomic_write(out / "report.md", _report_md(rows, fronts, results, quick, scene_path, elapsed).encode("utf-8"))
+    write_bytes_atomic(out / "report.md", _report_md(rows, fronts, results, quick, scene_path, elapsed).encode("utf-8"))
     for bench, front in fronts.items():
         if not front:
             continue

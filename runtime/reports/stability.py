@@ -17,15 +17,14 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import re
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import TensormassError
+from ..output import write_text_atomic
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
 
@@ -451,21 +450,6 @@ CASES = (case_stiffness, case_poisson, case_explicit, case_squash, case_scramble
 # ============================================================================== output
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
 def _fmt(value) -> str:
     if isinstance(value, bool):
         return str(value)
@@ -524,8 +508,8 @@ def run_stability(out_dir, quick=False, progress=print) -> list:
             summary = ", ".join(f"{r['law']}: {r['outcome']}{'' if r['ok'] else ' (NOT ok)'}" for r in got)
             progress(f"{case.__name__[5:]:>14s} {time.perf_counter() - t0:6.1f} s  {_short(summary, 200)}")
     total = time.perf_counter() - start
-    _write_atomic(out / "stability.csv", _csv_text(rows))
-    _write_atomic(out / "report.md", _report_text(rows, quick, total))
+    write_text_atomic(out / "stability.csv", _csv_text(rows))
+    write_text_atomic(out / "report.md", _report_text(rows, quick, total))
     if progress is not None:
         n_ok = sum(bool(r["ok"]) for r in rows)
         progress(f"{n_ok}/{len(rows)} cases met their expectation in {total:.1f} s; wrote {out / 'stability.csv'} "
