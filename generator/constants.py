@@ -13,11 +13,6 @@ from __future__ import annotations
 import sympy as sp
 
 
-def rest_symbols(n_nodes: int, dim: int) -> sp.Matrix:
-    """X_i_k: rest coordinate k of node i."""
-    return sp.Matrix(n_nodes, dim, lambda i, k: sp.Symbol(f"X{i}_{k}", real=True))
-
-
 def geometry_code(dim: int):
     """Straight-line code for the rest geometry at one integration point, shared by all points.
 

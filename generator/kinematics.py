@@ -31,8 +31,3 @@ def deformation_gradient(u: sp.Matrix, G: sp.Matrix) -> sp.Matrix:
 def green_lagrange(F: sp.Matrix) -> sp.Matrix:
     """E = (F^T F - I) / 2."""
     return (F.T * F - sp.eye(F.shape[0])) / 2
-
-
-def small_strain(F: sp.Matrix) -> sp.Matrix:
-    """eps = (F + F^T)/2 - I, the linearised strain."""
-    return (F + F.T) / 2 - sp.eye(F.shape[0])

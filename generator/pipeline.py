@@ -24,13 +24,16 @@ def backend_dir(out: Path, backend: str) -> Path:
     return Path(out) / backend
 
 
-def write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, data) -> None:
+    """Write text or bytes to a temporary file next to path, then rename it over path:
+    readers never see a half-written file, an interrupted run leaves the old one (or none)."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.chmod(tmp, 0o644)          # mkstemp creates 0600; generated files are ordinary files
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data.encode("utf-8") if isinstance(data, str) else data)
+        os.chmod(tmp, 0o644)          # mkstemp creates 0600; these are ordinary files
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

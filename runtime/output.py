@@ -16,36 +16,25 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..generator.pipeline import write_atomic
 from .errors import TensormassError
 
 __all__ = ["Writer", "write_bytes_atomic", "write_json_atomic", "write_text_atomic"]
 
 
 def write_bytes_atomic(path, data: bytes) -> None:
-    """Write to a temporary file next to path, then rename it over path: readers never see a
-    half-written file, and an interrupted run leaves the previous version (or nothing)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)          # mkstemp creates 0600; results are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        _remove(tmp)
-        raise
+    """Bytes written atomically (temporary file + rename; see generator.pipeline.write_atomic)."""
+    write_atomic(Path(path), data)
 
 
 def write_text_atomic(path, text: str) -> None:
-    """UTF-8 text, written atomically (see write_bytes_atomic)."""
-    write_bytes_atomic(path, text.encode("utf-8"))
+    """UTF-8 text, written atomically."""
+    write_atomic(Path(path), text)
 
 
 def _jsonable(value):

@@ -4,33 +4,13 @@ from __future__ import annotations
 import numpy as np
 
 from tensormass.generator.elements import element as reference
+from tensormass.runtime.bench import random_elements
+
+__all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error"]
 
 
 def reference_nodes(name: str) -> np.ndarray:
     return np.array([[float(x) for x in node] for node in reference(name).nodes])
-
-
-def random_elements(name: str, n: int, seed: int = 0, distortion: float = 0.08, straight: bool = False) -> np.ndarray:
-    """n random non-inverted elements: a random affine map of the reference element
-    (positive determinant) plus a small random perturbation of every node.
-    straight=True puts midside nodes back at their edge midpoints (for 'exact' rules)."""
-    rng = np.random.default_rng(seed)
-    ref = reference_nodes(name)
-    if reference(name).order == 2:
-        distortion *= 0.3          # midside nodes tolerate less before det J changes sign
-    dim = ref.shape[1]
-    out = np.empty((n,) + ref.shape)
-    for e in range(n):
-        while True:
-            A = np.eye(dim) + 0.3 * rng.standard_normal((dim, dim))
-            if np.linalg.det(A) > 0.5:
-                break
-        out[e] = ref @ A.T + rng.standard_normal(dim) + distortion * rng.standard_normal(ref.shape)
-    if straight:
-        from tensormass.generator.ir import _midside_edges
-        for m, a, b in _midside_edges(reference(name)):
-            out[:, m] = (out[:, a] + out[:, b]) / 2
-    return out
 
 
 def fd_gradient(fun, u: np.ndarray, h: float) -> np.ndarray:
