@@ -13,7 +13,7 @@ from functools import lru_cache
 
 from .base import Law, LawError, lame_from_E_nu
 
-__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names"]
+__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names", "is_quadratic"]
 
 
 @lru_cache(maxsize=None)
@@ -40,3 +40,21 @@ def get(name: str) -> Law:
         return _registry()[name]
     except KeyError:
         raise LawError(f"unknown law {name!r}; known laws: {', '.join(names())}") from None
+
+
+@lru_cache(maxsize=None)
+def is_quadratic(name: str) -> bool:
+    """True when W is a homogeneous quadratic in the displacement gradient H = F - I.
+
+    Then W_E(u) = 1/2 u.K.u with a constant K, and f_int = -K u exactly: the
+    runtime assembles K once and skips the kernel at every step (Hooke).
+    """
+    import sympy as sp
+    law = get(name)
+    H = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"H{i}{j}", real=True))
+    W = law.energy(sp.eye(3) + H, **law.symbols())
+    entries = list(H)
+    if not W.is_polynomial(*entries):          # checked before expanding: ln J, J^(-2/3) are slow to expand
+        return False
+    degrees = {sum(m) for m in sp.Poly(W, *entries).monoms()}
+    return degrees == {2}

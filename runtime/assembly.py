@@ -19,6 +19,7 @@ from threadpoolctl import threadpool_limits
 import scipy.sparse as sp
 from numba import njit, prange
 
+from .. import laws
 from .errors import ElementError, TensormassError
 
 __all__ = ["Assembler", "assemble", "colour_elements", "project_psd", "SparsePattern"]
@@ -173,14 +174,50 @@ class Assembler:
     def __init__(self, model, parallel: bool | None = None):
         self.model = model
         self.pattern = SparsePattern([p.dofs for p in model.parts], model.n_dofs)
-        # per part: scatter in parallel (coloured) or serially; see _use_parallel
-        self.parallel = [_use_parallel(p, parallel) for p in model.parts]
-        self.colours = [colour_elements(p.cells) if par else None for p, par in zip(model.parts, self.parallel)]
+        self._parallel_option = parallel
+        # Parts of a law quadratic in grad u (Hooke) have a constant K and f_int = -K u:
+        # their K is assembled once (again after a law switch) instead of at every call.
+        # (Not for solvers that load no stiffness kernel: explicit scenes never build one.)
+        needs_K = "stiffness" in getattr(model, "outputs", ("stiffness",))
+        self.constant = [needs_K and laws.is_quadratic(p.law) for p in model.parts]
         self.time = 0.0
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Re-read which cells each part models (after a law switch); the pattern stays."""
+        parts = self.model.parts
+        self.positions = [pos if p.index is None else pos[p.index]
+                          for p, pos in zip(parts, self.pattern.positions)]
+        # per part: scatter in parallel (coloured) or serially; see _use_parallel
+        self.parallel = [p.index is None and _use_parallel(p, self._parallel_option) for p in parts]
+        self.colours = [colour_elements(p.cells) if par else None for p, par in zip(parts, self.parallel)]
+        self._constant_K = None
 
     # -- parts ----------------------------------------------------------------------------------
     def _u(self, part, u):
         return self.model.element_displacements(part, u)
+
+    def _varying(self):
+        """(index, part) of the parts whose kernels run at every call: active, not constant."""
+        return [(i, p) for i, p in enumerate(self.model.parts) if p.n_active and not self.constant[i]]
+
+    def constant_stiffness(self) -> np.ndarray | None:
+        """CSR data of the constant-K parts (None when there are none), assembled on first use."""
+        if not any(c and p.n_active for c, p in zip(self.constant, self.model.parts)):
+            return None
+        if self._constant_K is None:
+            data = np.zeros(self.pattern.nnz)
+            zero = np.zeros(self.model.n_dofs)
+            for i, p in enumerate(self.model.parts):
+                if self.constant[i] and p.n_active:
+                    Ke = _global_ids(p, lambda p=p: p.kernel.stiffness(p.D_active, self._u(p, zero)))
+                    self._scatter_K(data, Ke, i)
+            self._constant_K = (data, self.pattern.matrix(data))
+        return self._constant_K[0]
+
+    def _constant_forces(self, u):
+        """f_int of the constant-K parts: -K u."""
+        return -(self._constant_K[1] @ u)
 
     def _projected(self, i: int, project) -> bool:
         if project is True:
@@ -190,7 +227,7 @@ class Assembler:
         return i in project
 
     def _scatter_K(self, data, Ke, i, scale=1.0):
-        pos = self.pattern.positions[i]
+        pos = self.positions[i]
         if self.parallel[i]:
             _, order, starts = self.colours[i]
             _scatter_matrix_coloured(data, Ke, pos, scale, order, starts)
@@ -202,27 +239,31 @@ class Assembler:
         """Total strain energy W(u); InvertedElementError propagates (with global cell ids)."""
         start = time.perf_counter()
         try:
-            return float(sum(_global_ids(p, lambda p=p: p.kernel.energy(p.D, self._u(p, u))).sum()
-                             for p in self.model.parts))
+            K = self.constant_stiffness()
+            W = 0.0 if K is None else -0.5 * float(u @ self._constant_forces(u))
+            return W + float(sum(_global_ids(p, lambda p=p: p.kernel.energy(p.D_active, self._u(p, u))).sum()
+                                 for _, p in self._varying()))
         finally:
             self.time += time.perf_counter() - start
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         """f_int = -dW/du, global."""
         start = time.perf_counter()
-        f = np.zeros(self.model.n_dofs)
-        for p in self.model.parts:
-            fe = _global_ids(p, lambda p=p: p.kernel.forces(p.D, self._u(p, u)))
-            _scatter_vector(f, fe, p.dofs)
+        K = self.constant_stiffness()
+        f = np.zeros(self.model.n_dofs) if K is None else self._constant_forces(u)
+        for _, p in self._varying():
+            fe = _global_ids(p, lambda p=p: p.kernel.forces(p.D_active, self._u(p, u)))
+            _scatter_vector(f, fe, p.dofs_active)
         self.time += time.perf_counter() - start
         return f
 
     def stiffness(self, u: np.ndarray, project=False) -> np.ndarray:
         """CSR data of K = d2W/du2 (optionally PSD-projected per element)."""
         start = time.perf_counter()
-        data = np.zeros(self.pattern.nnz)
-        for i, p in enumerate(self.model.parts):
-            Ke = _global_ids(p, lambda p=p: p.kernel.stiffness(p.D, self._u(p, u)))
+        K = self.constant_stiffness()
+        data = np.zeros(self.pattern.nnz) if K is None else K.copy()
+        for i, p in self._varying():
+            Ke = _global_ids(p, lambda p=p: p.kernel.stiffness(p.D_active, self._u(p, u)))
             self._scatter_K(data, project_psd(Ke) if self._projected(i, project) else Ke, i)
         self.time += time.perf_counter() - start
         return data
@@ -230,13 +271,21 @@ class Assembler:
     def forces_and_stiffness(self, u: np.ndarray, project=False):
         """(f_int, CSR data of K) in one kernel call per part."""
         start = time.perf_counter()
-        f, data = np.zeros(self.model.n_dofs), np.zeros(self.pattern.nnz)
-        for i, p in enumerate(self.model.parts):
-            fe, Ke = _global_ids(p, lambda p=p: p.kernel.forces_and_stiffness(p.D, self._u(p, u)))
-            _scatter_vector(f, fe, p.dofs)
+        K = self.constant_stiffness()
+        if K is None:
+            f, data = np.zeros(self.model.n_dofs), np.zeros(self.pattern.nnz)
+        else:
+            f, data = self._constant_forces(u), K.copy()
+        for i, p in self._varying():
+            fe, Ke = _global_ids(p, lambda p=p: p.kernel.forces_and_stiffness(p.D_active, self._u(p, u)))
+            _scatter_vector(f, fe, p.dofs_active)
             self._scatter_K(data, project_psd(Ke) if self._projected(i, project) else Ke, i)
         self.time += time.perf_counter() - start
         return f, data
+
+    def element_forces(self, part, u: np.ndarray) -> np.ndarray:
+        """(n_active, k * dim) element internal forces of one part (criteria such as R_S)."""
+        return _global_ids(part, lambda: part.kernel.forces(part.D_active, self._u(part, u)))
 
     def matrix(self, data: np.ndarray) -> sp.csr_matrix:
         return self.pattern.matrix(data)
@@ -254,6 +303,7 @@ class Assembler:
             one = np.zeros(1, dtype=np.int64)
             _scatter_matrix_coloured(data, np.zeros((1, nd, nd)), self.pattern.positions[0][:1], 1.0,
                                      one, np.array([0, 1], dtype=np.int64))
+        self.constant_stiffness()            # Hooke parts: their one assembly belongs to setup
 
 
 # A parallel region costs ~10 us on an idle machine but ~10 ms per colour when the
@@ -276,7 +326,8 @@ def _global_ids(part, call):
         return call()
     except ElementError as exc:
         message = str(exc).rsplit(": element(s)", 1)[0]
-        raise type(exc)(message, part.cell_ids[exc.elements]) from None
+        ids = part.cell_ids if part.index is None else part.cell_ids[part.index]
+        raise type(exc)(message, ids[exc.elements]) from None
 
 
 def assemble(model, u: np.ndarray, project=False):

@@ -65,10 +65,11 @@ class Context:
     def check_not_inverted(self, u):
         """Raise InvertedElementError if u inverts an element of a law undefined there."""
         for p in self.model.parts:
-            if laws.get(p.law).requires_positive_J:
-                bad = p.kernel.inverted(p.D, self.model.element_displacements(p, u))
+            if laws.get(p.law).requires_positive_J and p.n_active:
+                bad = p.kernel.inverted(p.D_active, self.model.element_displacements(p, u))
                 if bad.any():
-                    raise InvertedElementError(f"law {p.law!r}: det F <= 0", p.cell_ids[bad])
+                    ids = p.cell_ids if p.index is None else p.cell_ids[p.index]
+                    raise InvertedElementError(f"law {p.law!r}: det F <= 0", ids[bad])
 
 
 # --------------------------------------------------------------------------- Newton

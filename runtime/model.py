@@ -21,7 +21,7 @@ from .errors import ElementError, TensormassError
 from .mesh import NODES_PER_CELL, Mesh, boundary_faces, check_mesh, generate_bar, read_mesh
 from .scene import Loads, Output, Solver
 
-__all__ = ["Model", "Part", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
+__all__ = ["Model", "Part", "LawGroup", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
 
 # Kernel outputs each solver kind calls; energy only serves the line search and reports.
 _OUTPUTS = {
@@ -55,6 +55,26 @@ class Part:
     volume: np.ndarray           # (n,) rest volumes (areas in 2D)
     dofs: np.ndarray             # (n, k * dim) global dofs, node-major
     density: np.ndarray          # (n,) mass density of each cell
+    active: np.ndarray | None = None   # (n,) bool: cells this law currently models (None: all)
+
+    def __post_init__(self):
+        if self.active is None:
+            self.active = np.ones(len(self.cells), dtype=bool)
+        self._refresh()
+
+    def _refresh(self):
+        self.n_active = int(np.count_nonzero(self.active))
+        everything = self.n_active == len(self.cells)
+        # None when every cell is active: the common case pays no gather
+        self.index = None if everything else np.flatnonzero(self.active)
+        self.D_active = self.D if everything else self.D[self.index]
+        self.cells_active = self.cells if everything else self.cells[self.index]
+        self.dofs_active = self.dofs if everything else self.dofs[self.index]
+
+    def set_active(self, mask: np.ndarray) -> None:
+        """Change which cells this part's law models (law switching); constants are kept for all."""
+        self.active = np.asarray(mask, dtype=bool).copy()
+        self._refresh()
 
     @property
     def key(self) -> tuple:
@@ -62,6 +82,28 @@ class Part:
 
     def __len__(self) -> int:
         return len(self.cells)
+
+
+@dataclass
+class LawGroup:
+    """Parts that share the same cells under different laws; each cell is active in exactly one.
+
+    Built for the cells a switch_law rule can reach: parts[0] is the material's own law.
+    `current[c]` indexes `laws` (and `parts`) for cell c of the group.
+    """
+    parts: list                  # indices into Model.parts
+    laws: list                   # law name of each of those parts
+    current: np.ndarray          # (n,) int
+
+    def switch(self, model, cells: np.ndarray, law: str) -> int:
+        """Move the given group-local cells to `law`; returns how many changed."""
+        target = self.laws.index(law)
+        changed = cells[self.current[cells] != target]
+        if changed.size:
+            self.current[changed] = target
+            for k, i in enumerate(self.parts):
+                model.parts[i].set_active(self.current == k)
+        return int(changed.size)
 
 
 # --------------------------------------------------------------------------- mesh and materials
@@ -171,12 +213,13 @@ class Model:
 
     def __init__(self, mesh: Mesh, materials, fixed=(), loads: Loads | None = None, probes=(),
                  solver: Solver | None = None, output: Output | None = None, name: str = "model",
-                 check: bool = True):
+                 check: bool = True, adapt=()):
         start = time.perf_counter()
         if check:
             check_mesh(mesh)
         self.mesh, self.name = mesh, name
         self.materials = list(materials)
+        self._specs = (list(fixed), list(probes))          # kept for rebuilt()
         self.solver = solver if solver is not None else Solver()
         self.output = output if output is not None else Output()
         self.loads = loads if loads is not None else Loads()
@@ -184,6 +227,8 @@ class Model:
         self.n_dofs = self.n_points * self.dim
         self.size = _size(mesh.points)
         self.outputs = outputs_for(self.solver.kind)
+        self.adapt = list(adapt)
+        self.groups: list = []                     # LawGroup per set of switchable cells
         self.parts = self._build_parts()
         self.mass = self._lumped_mass()
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
@@ -199,9 +244,26 @@ class Model:
         built = mesh is None                       # scene_mesh has checked it already
         mesh = scene_mesh(scene) if built else mesh
         model = cls(mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver,
-                    scene.output, scene.name, check=not built)
+                    scene.output, scene.name, check=not built, adapt=getattr(scene, "adapt", ()))
         model.scene = scene
         return model
+
+    def rebuilt(self, mesh: Mesh) -> "Model":
+        """The same scene on another mesh (after refinement): parts, masses, constraints and loads anew."""
+        fixed, probes = self._specs
+        model = Model(mesh, self.materials, fixed, self.loads, probes, self.solver, self.output, self.name,
+                      adapt=self.adapt)
+        model.scene = self.scene
+        return model
+
+    def set_cell_laws(self, names) -> None:
+        """Put every cell of a switchable group under the law named for it (global cell order)."""
+        for group in self.groups:
+            want = np.asarray(names)[self.parts[group.parts[0]].cell_ids]
+            for k, law in enumerate(group.laws):
+                cells = np.flatnonzero(want == law)
+                if cells.size:
+                    group.switch(self, cells, law)
 
     @staticmethod
     def required_kernels(scene, mesh: Mesh | None = None) -> set:
@@ -209,7 +271,11 @@ class Model:
         mesh = scene_mesh(scene) if mesh is None else mesh
         index = assign_materials(mesh, scene.materials)
         outputs = outputs_for(scene.solver.kind)
-        return {key + (outputs,) for key in _groups(mesh, scene.materials, index)}
+        keys = set()
+        for (element, law, quad) in _groups(mesh, scene.materials, index):
+            for reach in _reachable_laws(law, getattr(scene, "adapt", ())):
+                keys.add((element, reach, quad, outputs))
+        return keys
 
     # -- parts ---------------------------------------------------------------------------------
     def _build_parts(self) -> list:
@@ -217,27 +283,37 @@ class Model:
         offsets = np.concatenate([[0], np.cumsum([len(b) for b in self.mesh.blocks])])
         parts = []
         for (element, law, quad), members in _groups(self.mesh, self.materials, index).items():
-            # a module attribute lookup, so tests can spy on which kernels get loaded
-            kernel = _kernels.load_kernel(element, law, quad, backend=self.solver.backend)
             cells = np.vstack([self.mesh.blocks[b].cells[ids] for b, ids, _ in members])
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
-            params = self._parameters(law, members)
-            D = self._constants(kernel, cells, cell_ids, params)
-            stride = 1 + kernel.n_dofs
-            volume = D[:, 0:kernel.n_points * stride:stride].sum(axis=1)
             dofs = (cells[:, :, None] * self.dim + np.arange(self.dim)).reshape(len(cells), -1)
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
-            parts.append(Part(element, law, quad, kernel, cells, cell_ids, D, volume, dofs, rho))
+            reach = _reachable_laws(law, self.adapt)
+            first = len(parts)
+            for k, name in enumerate(reach):
+                # a module attribute lookup, so tests can spy on which kernels get loaded
+                kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
+                D = self._constants(kernel, cells, cell_ids, self._parameters(name, members))
+                stride = 1 + kernel.n_dofs
+                volume = D[:, 0:kernel.n_points * stride:stride].sum(axis=1)
+                active = np.full(len(cells), k == 0)
+                parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active))
+            if len(reach) > 1:
+                self.groups.append(LawGroup(list(range(first, len(parts))), list(reach),
+                                            np.zeros(len(cells), dtype=np.int64)))
         return parts
 
     def _parameters(self, law: str, members) -> dict:
         """Native law parameters, one value per cell (materials may differ within a part)."""
+        from .scene import switch_parameters
         columns: dict = {}
         for _, ids, m in members:
             mat = self.materials[m]
             try:
-                values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **dict(mat.params))
-            except laws.LawError as exc:
+                if law == mat.law:
+                    values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **dict(mat.params))
+                else:                              # a law a switch_law rule can reach
+                    values = switch_parameters(mat, law)
+            except (laws.LawError, TensormassError) as exc:
                 raise TensormassError(f"material {m} ({law}): {exc}") from None
             for p, v in values.items():
                 columns.setdefault(p, []).append(np.broadcast_to(v, (len(ids),)))
@@ -256,7 +332,7 @@ class Model:
         """Per-dof lumped mass: density x volume split equally over each element's nodes."""
         node_mass = np.zeros(self.n_points)
         for part in self.parts:
-            share = part.density * part.volume / part.cells.shape[1]
+            share = np.where(part.active, part.density * part.volume / part.cells.shape[1], 0.0)
             np.add.at(node_mass, part.cells, np.broadcast_to(share[:, None], part.cells.shape))
         if np.any(node_mass < 0):
             raise TensormassError("negative density gives negative nodal masses")
@@ -327,8 +403,8 @@ class Model:
 
     # -- helpers for the integrators ------------------------------------------------------------
     def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
-        """(n, k, dim) nodal displacements of a part's elements from the global vector."""
-        return u.reshape(self.n_points, self.dim)[part.cells]
+        """(n_active, k, dim) nodal displacements of a part's active elements (pair with part.D_active)."""
+        return u.reshape(self.n_points, self.dim)[part.cells_active]
 
     def warm_up(self, outputs=None) -> None:
         """Compile (or load from numba's cache) the kernel outputs the solver will call."""
@@ -337,14 +413,44 @@ class Model:
             for name in outputs or self.outputs:
                 getattr(part.kernel, name)(D, u)
 
+    @property
+    def n_elements(self) -> int:
+        """Cells of the mesh that carry a material (switchable cells counted once)."""
+        return sum(p.n_active for p in self.parts)
+
     def kernel_info(self) -> list:
+        """Kernels loaded; `elements` is how many cells each models now (0: reachable by switching)."""
         return [{"element": p.element, "law": p.law, "quadrature": p.quadrature,
-                 "backend": p.kernel.backend, "outputs": list(self.outputs), "elements": len(p)}
+                 "backend": p.kernel.backend, "outputs": list(self.outputs), "elements": p.n_active}
                 for p in self.parts]
+
+    def cell_law(self) -> np.ndarray:
+        """Law name index (into sorted law names of the parts) of every cell, -1 where none."""
+        names = sorted({p.law for p in self.parts})
+        out = np.full(self.mesh.n_cells, -1, dtype=np.int64)
+        for p in self.parts:
+            out[p.cell_ids[p.active]] = names.index(p.law)
+        return out
 
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
         return {name: U[node].tolist() for name, node in self.probes.items()}
+
+
+def _reachable_laws(law: str, rules) -> list:
+    """The material's law first, then every law a switch_law rule can move its cells to (in rule order).
+
+    Reachability is transitive (hooke -> stvk -> stable_neohookean)."""
+    from .scene import switch_applies
+    reach = [law]
+    grew = True
+    while grew:
+        grew = False
+        for rule in rules:
+            if rule.action == "switch_law" and rule.law not in reach and any(switch_applies(rule, x) for x in reach):
+                reach.append(rule.law)
+                grew = True
+    return reach
 
 
 def _face_measure(points, nodes, dim) -> float:

@@ -94,6 +94,11 @@ class Writer:
         self.closed = False
         self._offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
 
+    def set_mesh(self, mesh) -> None:
+        """Frames from now on are of this mesh (adaptive refinement changes it during a run)."""
+        self.mesh = mesh
+        self._offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
+
     # -- paths ---------------------------------------------------------------------------------
     @property
     def pvd_path(self) -> Path:

@@ -144,6 +144,27 @@ class Output:
 
 
 @dataclass
+class Adapt:
+    """One adaptation rule (see runtime.adapt): when an element's criterion passes the threshold, act.
+
+    switch_law: the element changes to `law` (only elements now under `from_law`, any other law
+    when None); with `back`, it returns to its previous law once the criterion falls below `back`.
+    refine: triangles and tetrahedra are bisected (at most `rounds` times over the run).
+    relative: the threshold is a fraction of the largest value over the mesh (the thesis' R_S rule).
+    """
+    criterion: str                        # R_L | R_A | R_M | R_HM | R_S | rotation (degrees)
+    threshold: float
+    action: str = "switch_law"            # switch_law | refine
+    law: str | None = None                # target law of switch_law
+    from_law: str | None = None           # scene key "from"
+    back: float | None = None             # switch back below this value (hysteresis)
+    relative: bool = False
+    below: bool = False                   # act when the criterion is BELOW the threshold (quality criteria)
+    every: int = 1                        # evaluate every N steps
+    rounds: int = 1                       # refine: how many refinement passes over the whole run
+
+
+@dataclass
 class Scene:
     mesh: MeshSpec
     materials: list                       # [Material]
@@ -152,6 +173,7 @@ class Scene:
     solver: Solver = field(default_factory=Solver)
     probes: list = field(default_factory=list)    # [Probe]
     output: Output = field(default_factory=Output)
+    adapt: list = field(default_factory=list)     # [Adapt]
     name: str = "scene"
     description: str = ""
     source: str | None = None             # the scene file, when read from one
@@ -278,7 +300,7 @@ def box_contains(box, points, tol: float = 0.0) -> np.ndarray:
 
 # ============================================================================== parsing
 
-_TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output")
+_TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt")
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
 _FIXED = ("box", "displacement", "components")
@@ -288,6 +310,9 @@ _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations",
            "newton_max_iterations", "rayleigh", "project_psd", "backend")
 _PROBE = ("name", "point")
 _OUTPUT = ("dir", "every")
+_ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
+ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
+ADAPT_ACTIONS = ("switch_law", "refine")
 
 SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
 LINEAR_SOLVERS = ("auto", "direct", "cg")
@@ -419,13 +444,14 @@ class _Parser:
         if dup is not None:
             raise SceneError(f"probe[{names.index(dup, names.index(dup) + 1)}].name: duplicate probe name {dup!r}")
         output = self.output(self.table(data.get("output", {}), "output"))
+        adapt = [self.adapt(t, f"adapt[{i}]") for i, t in enumerate(self.tables(data.get("adapt", []), "adapt"))]
         name = self.string(data.get("name", "scene"), "name")
         description = self.string(data.get("description", ""), "description")
         if solver.kind == "static" and not fixed:
             raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
                              "(without constraints the stiffness matrix is singular)")
         scene = Scene(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver,
-                      probes=probes, output=output, name=name, description=description)
+                      probes=probes, output=output, adapt=adapt, name=name, description=description)
         if load_mesh:
             scene.validate(scene.load_mesh())
         return scene
@@ -626,6 +652,50 @@ class _Parser:
             raise SceneError(f"{key}.name: must not be empty")
         return Probe(name=name, point=self.vector(t["point"], f"{key}.point"))
 
+    def adapt(self, t, key) -> Adapt:
+        from .. import laws
+        t = self.table(t, key)
+        self.keys(t, key, _ADAPT)
+        for k in ("criterion", "threshold"):
+            if k not in t:
+                raise SceneError(f"{key}.{k}: missing (an [[adapt]] rule needs criterion and threshold)")
+        rule = Adapt(criterion=self.string(t["criterion"], f"{key}.criterion", ADAPT_CRITERIA),
+                     threshold=self.number(t["threshold"], f"{key}.threshold", min_value=0.0))
+        rule.action = self.string(t.get("action", "switch_law"), f"{key}.action", ADAPT_ACTIONS)
+        for k, attr in (("law", "law"), ("from", "from_law")):
+            if k in t:
+                value = self.string(t[k], f"{key}.{k}")
+                if value not in laws.names():
+                    raise SceneError(f"{key}.{k}: unknown law {value!r}; known: {', '.join(laws.names())}")
+                setattr(rule, attr, value)
+        if rule.action == "switch_law":
+            if rule.law is None:
+                raise SceneError(f"{key}.law: missing (the law elements switch to)")
+            if rule.from_law == rule.law:
+                raise SceneError(f"{key}.from: same law as {key}.law ({rule.law!r})")
+        elif "law" in t or "from" in t or "back" in t:
+            extra = next(k for k in ("law", "from", "back") if k in t)
+            raise SceneError(f"{key}.{extra}: only used with action = \"switch_law\"")
+        for k in ("relative", "below"):
+            if k in t:
+                setattr(rule, k, self.boolean(t[k], f"{key}.{k}"))
+        if "back" in t:
+            rule.back = self.number(t["back"], f"{key}.back", min_value=0.0)
+            if (rule.back >= rule.threshold) != rule.below or rule.back == rule.threshold:
+                side = "above" if rule.below else "below"
+                raise SceneError(f"{key}.back: must be {side} the threshold {_fmt(rule.threshold)} "
+                                 f"(got {_fmt(rule.back)}): the gap is the hysteresis")
+        if rule.relative and rule.threshold > 1.0:
+            raise SceneError(f"{key}.threshold: a relative threshold is a fraction of the maximum, in [0, 1] "
+                             f"(got {_fmt(rule.threshold)})")
+        if "every" in t:
+            rule.every = self.integer(t["every"], f"{key}.every", 1)
+        if "rounds" in t:
+            if rule.action != "refine":
+                raise SceneError(f"{key}.rounds: only used with action = \"refine\"")
+            rule.rounds = self.integer(t["rounds"], f"{key}.rounds", 1)
+        return rule
+
     def output(self, t) -> Output:
         self.keys(t, "output", _OUTPUT)
         out = Output()
@@ -723,3 +793,43 @@ def _check_against_mesh(scene: Scene, mesh) -> None:
             m = scene.materials[int(i)]
             _catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
         offset += len(blk)
+    _check_adapt(scene, mesh, which)
+
+
+def _check_adapt(scene: Scene, mesh, which) -> None:
+    """Every law a switch_law rule can reach must exist for the cells it reaches; refine needs simplices."""
+    for r, rule in enumerate(scene.adapt):
+        key = f"adapt[{r}]"
+        if rule.action == "refine":
+            bad = sorted({b.type for b in mesh.blocks} - {"triangle", "tetra"})
+            if bad:
+                raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
+            continue
+        for blk, w in zip(mesh.blocks, which):
+            for i in np.unique(w):
+                m = scene.materials[int(i)]
+                if not switch_applies(rule, m.law):
+                    continue
+                _catalogue_check(f"{key}.law", blk.type, rule.law, m.quadrature)
+                try:
+                    switch_parameters(m, rule.law)
+                except SceneError as exc:
+                    raise SceneError(f"{key}.law: {exc}") from None
+
+
+def switch_applies(rule: Adapt, law: str) -> bool:
+    """Whether a switch_law rule moves elements that are under `law`."""
+    return rule.action == "switch_law" and law != rule.law and rule.from_law in (None, law)
+
+
+def switch_parameters(material: Material, law_name: str) -> dict:
+    """Native parameters of `law_name` for a material written for another law (from E, nu, or same names)."""
+    from .. import laws
+    law = laws.get(law_name)
+    if material.E is not None and material.nu is not None:
+        return law.native_parameters(E=material.E, nu=material.nu)
+    missing = [p for p in law.parameters if p not in material.params]
+    if missing:
+        raise SceneError(f"material with law {material.law!r} gives no E, nu and no {', '.join(missing)} "
+                         f"for law {law_name!r}; give E and nu")
+    return law.native_parameters(**{p: material.params[p] for p in law.parameters})

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .adapt import MAX_STATIC_PASSES, Adapter
 from .errors import TensormassError
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
@@ -39,6 +40,7 @@ class Summary:
     kinetic_energy: float | None          # final, dynamic solvers only
     stable_dt: float | None               # explicit only: estimated critical step at rest
     per_step: dict = field(default_factory=dict)
+    adapt: dict | None = None             # [[adapt]] rules: switches, splits and their events
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -69,6 +71,7 @@ class Simulation:
             self.model = Model.from_scene(scene_or_model)
             self._setup = time.perf_counter() - start
         self.progress, self.writer = progress, writer
+        self.adapter = Adapter(self.model) if self.model.adapt else None
         self._u0, self._v0 = self._initial(u0), self._initial(v0)
         self.ctx = None
         self.stable_dt = None
@@ -129,6 +132,9 @@ class Simulation:
         for k in range(1, integ.n_steps + 1):
             t0 = time.perf_counter()
             info = integ.step(k)
+            if self.adapter is not None:
+                self._adapt(k)
+                integ, model = self.integrator, self.model      # refinement rebuilds both
             history["wall"].append(time.perf_counter() - t0)
             history["time"].append(info["time"])
             history["newton"].append(info["newton"])
@@ -139,6 +145,42 @@ class Simulation:
             if self.progress is not None:
                 self.progress(k, integ.n_steps)
         return history
+
+    # -- adaptation -----------------------------------------------------------------------------
+    def _adapt(self, k: int) -> None:
+        """Apply the [[adapt]] rules after step k.
+
+        Static: the last load step is re-solved until nothing changes (the answer is the
+        equilibrium of the adapted model); earlier load steps only pass their switches on
+        to the next step, which costs no extra Newton iterations.
+        """
+        static = self.model.solver.kind == "static" and k == self.integrator.n_steps
+        for _ in range(MAX_STATIC_PASSES if static else 1):
+            change = self.adapter.update(self.ctx, k)
+            if change.model is not None:
+                self._rebuild(change.model, change.parents)
+            if not change or not static:
+                return
+            self.integrator.step(k)          # equilibrium of the adapted model at the same load
+
+    def _rebuild(self, model, parents) -> None:
+        """Carry the state and the counters over to a refined model (new pattern, masses, constants)."""
+        from .refine import interpolate_nodal
+        old, dim = self.ctx, model.dim
+        ctx = Context(model)
+        model.warm_up()
+        ctx.asm.warm_up()
+        ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel()
+        ctx.v = interpolate_nodal(old.v.reshape(-1, dim), parents).ravel()
+        ctx.t = old.t
+        ctx.newton_iterations, ctx.linear_iterations = old.newton_iterations, old.linear_iterations
+        ctx.asm.time, ctx.linear.time = old.asm.time, old.linear.time
+        self.model, self.ctx = model, ctx
+        self.integrator = make_integrator(ctx)
+        if isinstance(self.integrator, Explicit):
+            self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
+        if self.writer is not None and hasattr(self.writer, "set_mesh"):
+            self.writer.set_mesh(model.mesh)
 
     def _energies(self) -> dict:
         """Elastic, kinetic and external work at the current state (not counted as assembly time)."""
@@ -153,7 +195,11 @@ class Simulation:
         if self.writer is None:
             return
         fields = {} if self.model.solver.kind == "static" else {"velocity": self.velocity}
-        self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields)
+        if self.adapter is None:
+            self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields)
+        else:                                # watch the criteria and the law of each cell in ParaView
+            self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields,
+                                    cell_fields=self.adapter.cell_fields(self.ctx))
 
     def _summarise(self, setup, total, history) -> Summary:
         ctx, model = self.ctx, self.model
@@ -161,9 +207,10 @@ class Simulation:
         return Summary(
             name=model.name, solver=model.solver.kind, steps=self.integrator.n_steps,
             n_dofs=model.n_dofs, n_free_dofs=int(model.free_dofs.size),
-            n_elements=sum(len(p) for p in model.parts), kernels=model.kernel_info(),
+            n_elements=model.n_elements, kernels=model.kernel_info(),
             time={"setup": setup, "first_step": history["wall"][0] if history["wall"] else 0.0,
                   "assembly": ctx.asm.time, "linear_solve": ctx.linear.time, "total": total},
             iterations={"newton": ctx.newton_iterations, "linear": ctx.linear_iterations},
             probes=model.probe_values(ctx.u), energy=last("elastic"), kinetic_energy=last("kinetic"),
-            stable_dt=self.stable_dt, per_step=history)
+            stable_dt=self.stable_dt, per_step=history,
+            adapt=None if self.adapter is None else self.adapter.summary(model))

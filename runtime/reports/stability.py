@@ -70,9 +70,9 @@ def min_det_F(model, u) -> float:
         if getattr(k, "recompute", False):
             continue
         ue = model.element_displacements(part, np.asarray(u, dtype=float))
-        n, stride = len(part.D), 1 + k.n_dofs
+        n, stride = part.n_active, 1 + k.n_dofs
         for q in range(k.n_points):
-            G = part.D[:, q * stride + 1:(q + 1) * stride].reshape(n, k.n_nodes, k.dim)
+            G = part.D_active[:, q * stride + 1:(q + 1) * stride].reshape(n, k.n_nodes, k.dim)
             F = np.eye(k.dim) + np.einsum("eia,eib->eab", ue, G)
             d = np.linalg.det(F)
             if d.size:
@@ -166,7 +166,7 @@ class _Run:
         from ... import laws
         for p in sim.model.parts:
             if laws.get(p.law).requires_positive_J:
-                bad = p.kernel.inverted(p.D, sim.model.element_displacements(p, u))
+                bad = p.kernel.inverted(p.D_active, sim.model.element_displacements(p, u))
                 if bad.any():
                     ids = ", ".join(str(int(i)) for i in p.cell_ids[bad][:8])
                     more = f" and {int(bad.sum()) - 8} more" if bad.sum() > 8 else ""
