@@ -165,6 +165,22 @@ def _fmt_kernels(kernels) -> str:
     return str(kernels)
 
 
+def _adapt_rows(adapt) -> list:
+    """What the [[adapt]] rules did: counts, the laws at the end, and when things changed."""
+    if not adapt:
+        return []
+    laws = ", ".join(f"{n} {law}" for law, n in (adapt.get("elements_per_law") or {}).items())
+    rows = [("adaptation", f"{adapt.get('switched', 0)} switch(es), {adapt.get('switched_back', 0)} back, "
+                           f"{adapt.get('split', 0)} cell(s) split; at the end: {laws or '?'} "
+                           f"({_fmt_seconds(adapt.get('time'))} evaluating rules)")]
+    events = adapt.get("events") or []
+    shown = [f"step {e['step']}: {e['count']} {e['action']}" + (f" -> {e['law']}" if e.get("law") else "")
+             for e in events[:6]]
+    if events:
+        rows.append(("adapt events", "; ".join(shown) + (f"; ... ({len(events)} in all)" if len(events) > 6 else "")))
+    return rows
+
+
 def print_summary(data: dict, stream=None, json_path=None) -> None:
     """The end-of-run report (the keys of Summary.to_dict(), tolerant of missing ones)."""
     import math
@@ -200,6 +216,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((f"probe {name}", f"u = {_fmt_vec(u)} m, |u| = {norm:.4g} m"))
         except (TypeError, ValueError):
             rows.append((f"probe {name}", str(u)))
+    rows += _adapt_rows(data.get("adapt"))
     o = data.get("output")
     if o:
         where = o.get("pvd") or f"{o['dir']} (no frame written)"

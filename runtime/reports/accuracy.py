@@ -8,7 +8,8 @@ claim 200 triangle6 vs 3200 triangles), volume (volume loss of a compressed 5 m 
 thesis' FEM numbers), mixed (the 8 x 1 x 1 m mixed-element bar against hexahedra and tetra10),
 large_deflection (soft cantilever: hooke vs stvk vs neohookean vs stable_neohookean), shear and
 torsion (the thesis' ch. 7 5 m cube: reaction force / torque on the top face against the thesis'
-formulas and the finest tetra10 run).
+formulas and the finest tetra10 run), adaptive_beam (hooke / stvk / adaptive hooke->stvk on a large-
+rotation cantilever) and refinement (R_S refinement against uniform refinement; see adaptive.py).
 results.csv starts with a `benchmark` column and has a `case` column (volume: nu and compression);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
 benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
@@ -479,7 +480,8 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 
 # -- entry points ----------------------------------------------------------------------------------
-BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion")
+BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
+                   "adaptive_beam", "refinement")
 
 
 def _resolve(benchmarks) -> list:
