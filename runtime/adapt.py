@@ -318,10 +318,13 @@ class Adapter:
         if not marked.any():
             return
         result = refine(model.mesh, marked, propagate=True)      # Rivara: quality stays bounded
-        laws_now = _cell_law_names(model)
+        laws_now, came_from = _cell_law_names(model)
         new = model.rebuilt(result.mesh)
         new.set_cell_laws(laws_now[result.cell_parent])
         self._init_groups(new)
+        for group in new.groups:                                  # children keep their parent's hysteresis
+            parent = result.cell_parent[new.parts[group.parts[0]].cell_ids]
+            group.previous = np.array([group.laws.index(law) for law in came_from[parent]], dtype=np.int64)
         change.split, change.model, change.parents = result.n_split, new, result.parents
         self.tally.split += result.n_split
         self._event(ctx, step, rules[0], "refine", result.n_split, cells=int(new.mesh.n_cells))
@@ -348,9 +351,13 @@ class Adapter:
         return values
 
 
-def _cell_law_names(model) -> np.ndarray:
+def _cell_law_names(model) -> tuple:
+    """(current law, law it came from) of every cell, by name, in global cell order."""
     names = np.empty(model.mesh.n_cells, dtype=object)
     for p in model.parts:
         ids = p.cell_ids if p.index is None else p.cell_ids[p.index]
         names[ids] = p.law
-    return names
+    came_from = names.copy()
+    for group in model.groups:
+        came_from[model.parts[group.parts[0]].cell_ids] = np.asarray(group.laws, dtype=object)[group.previous]
+    return names, came_from

@@ -805,10 +805,12 @@ def _check_adapt(scene: Scene, mesh, which) -> None:
             if bad:
                 raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
             continue
+        from .model import _reachable_laws
         for blk, w in zip(mesh.blocks, which):
             for i in np.unique(w):
                 m = scene.materials[int(i)]
-                if not switch_applies(rule, m.law):
+                # chains count: hooke -> stvk -> neohookean reaches neohookean through rule 1
+                if rule.law not in _reachable_laws(m.law, scene.adapt)[1:]:
                     continue
                 _catalogue_check(f"{key}.law", blk.type, rule.law, m.quadrature)
                 try:

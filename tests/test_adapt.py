@@ -657,8 +657,6 @@ def bending_2d(points, c=0.1):
     return u.ravel()
 
 
-@pytest.mark.xfail(strict=True, reason="adapt.py Adapter._refine: _init_groups(new) resets group.previous to the "
-                                       "current law, so cells switched up before a refinement never switch back")
 def test_hysteresis_survives_refinement():
     rules = (Adapt(criterion="rotation", threshold=5.0, back=2.0, law="stvk"),
              Adapt(criterion="rotation", threshold=5.0, action="refine"))
@@ -786,9 +784,6 @@ def test_native_parameters_carry_over_to_a_law_with_the_same_names():
     assert [p.law for p in model.parts] == ["hooke", "stvk"]
 
 
-@pytest.mark.xfail(strict=True, reason="scene.py _check_adapt checks only laws a rule reaches from a material's own "
-                                       "law, not transitively: tetra/hooke/exact -> stvk -> neohookean parses, then "
-                                       "Model fails with a ValueError from the catalogue instead of a SceneError")
 def test_transitively_reached_law_is_checked():
     data = copy.deepcopy(TETRA)
     data["material"][0]["quadrature"] = "exact"
