@@ -106,3 +106,40 @@ def test_unknown_entry_is_an_error():
     with pytest.raises(ValueError, match="unknown catalogue entry"):
         bench.resolve_entries(["tetra_nothing_gauss1"])
     assert [e.name for e in bench.resolve_entries(["tetra_mooney_rivlin_gauss1"])] == ["tetra_mooney_rivlin_gauss1"]
+
+
+def test_quick_steps_bench_writes_json(tmp_path, monkeypatch):
+    from tensormass.runtime import bench_steps
+    monkeypatch.setitem(__import__("sys").modules, "felupe", None)     # comparison skipped
+    lines = []
+    path = tmp_path / "steps.json"
+    report = bench_steps.run_steps_bench(quick=True, json_path=path, progress=lines.append, bodies=["tetra_1k"])
+    assert {r["body"] for r in report["results"]} == {"tetra_1k"}
+    assert len(report["results"]) == len(bench_steps.LAWS) * 2 * len(bench_steps.LINEAR)
+    for r in report["results"]:
+        assert r["per_unit_s"] > 0 and r["newton"] >= 1 and r["solver_used"]
+    newton = report["newton_iteration"]
+    assert newton["free_dofs"] > 0 and newton["assembly_s"] > 0
+    for label, r in newton["solvers"].items():
+        assert r["relative_residual"] < 1e-7, label
+        assert r["difference_to_first"] < 1e-5, label
+    assert newton["solvers"]["auto"]["used"].startswith("band")
+    assert newton["felupe"] is None and newton["felupe_ratio"] is None
+    assert any("FElupe comparison skipped" in line for line in lines)
+    assert json.loads(path.read_text())["newton_iteration"]["body"] == bench_steps.QUICK_NEWTON_CASE[0]
+
+
+def test_felupe_comparison_when_installed():
+    pytest.importorskip("felupe")
+    from tensormass.runtime import bench_steps
+    report = bench_steps.compare_newton(bench_steps.QUICK_NEWTON_CASE, 1, 1, progress=None)
+    assert report["felupe"]["free_dofs"] == report["free_dofs"]
+    assert report["felupe_ratio"] > 0
+    assert report["displacement_ratio"] == pytest.approx(1.0, rel=1e-6)     # the same problem
+
+
+def test_steps_command_line():
+    parser = argparse.ArgumentParser()
+    bench.add_bench_command(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "steps", "--quick", "--json", "s.json"])
+    assert args.quick and args.json == "s.json" and args.run.__name__ == "cmd_steps"
