@@ -120,6 +120,12 @@ class SparsePattern:
 
     def __init__(self, dof_tables, n_dofs: int):
         self.n_dofs = n_dofs
+        # parts of one switchable group share their dof table: sort its entries once
+        first = {}
+        for i, d in enumerate(dof_tables):
+            first.setdefault(id(d), i)
+        owner = [first[id(d)] for d in dof_tables]
+        dof_tables = [dof_tables[i] for i in sorted(set(owner))]
         keys = [self._keys(d, n_dofs) for d in dof_tables]
         diag = np.arange(n_dofs, dtype=np.int64) * (n_dofs + 1)   # keep every diagonal entry
         uniq, inverse = np.unique(np.concatenate(keys + [diag]), return_inverse=True)
@@ -133,6 +139,8 @@ class SparsePattern:
             nd = d.shape[1]
             self.positions.append(inverse[start:start + k.size].reshape(len(d), nd, nd).astype(np.int64))
             start += k.size
+        slot = {o: j for j, o in enumerate(sorted(set(owner)))}
+        self.positions = [self.positions[slot[o]] for o in owner]
         self.diagonal = inverse[start:].astype(np.int64)
         self._rows = rows
 
