@@ -41,9 +41,10 @@ NEWTON_REPEATS, QUICK_NEWTON_REPEATS = 5, 2
 FELUPE_REPEATS, QUICK_FELUPE_REPEATS = 3, 1
 
 E, NU, DENSITY, GRAVITY = 1.0e6, 0.3, 1000.0, 9.81
+BACKENDS = ("numba", "c")
 
 
-def scene_text(element, cells, size, law, kind, linear, steps) -> str:
+def scene_text(element, cells, size, law, kind, linear, steps, backend="numba") -> str:
     quadrature = "gauss1" if element == "tetra" else "gauss2"
     return f"""
 name = "bench_{element}_{law}_{kind}"
@@ -69,6 +70,7 @@ dt = {1 / 60}
 steps = {steps}
 linear = "{linear}"
 rayleigh = [0.1, 0.01]
+backend = "{backend}"
 """
 
 
@@ -109,27 +111,43 @@ def _best(call, repeats):
     return best, out
 
 
-def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=NEWTON_SOLVERS) -> dict:
+def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=NEWTON_SOLVERS,
+                     backend="numba") -> dict:
     """One Newton iteration at rest (u = 0) of the static cantilever: assembly, then each linear solver.
 
     Times are the best of `repeats`; a solver's first solve (which also orders the
     unknowns for the band Cholesky, once per sparsity pattern) is reported apart.
+    The assembly with the other kernel backend is timed too (`assembly_s_by_backend`).
     """
     from .integrators import Context
     from .model import Model
     from .scene import Scene
     from .solvers import LinearSolver, has_cholmod
-    model = Model.from_scene(Scene.from_string(scene_text(element, cells, size, law, "static", "auto", 1)))
+    by_backend = {}
+    for other in BACKENDS:
+        if other == backend:
+            continue
+        try:
+            m = Model.from_scene(Scene.from_string(scene_text(element, cells, size, law, "static", "auto", 1, other)))
+            c = Context(m)
+            m.warm_up()
+            c.asm.warm_up()
+            zero = np.zeros(m.n_dofs)
+            by_backend[other] = _best(lambda: c.asm.forces_and_stiffness(zero), repeats)[0]
+        except Exception as exc:                  # e.g. no C compiler: report, do not fail the bench
+            by_backend[other] = f"unavailable ({exc})"
+    model = Model.from_scene(Scene.from_string(scene_text(element, cells, size, law, "static", "auto", 1, backend)))
     ctx = Context(model)
     model.warm_up()
     ctx.asm.warm_up()
     u = np.zeros(model.n_dofs)
     assembly, (f_int, K) = _best(lambda: ctx.asm.forces_and_stiffness(u), repeats)
+    by_backend[backend] = assembly
     rhs = f_int + model.f_ext                     # -gradient of the potential
     s = model.solver
     out = {"element": element, "cells": list(cells), "size": list(size), "law": law,
            "elements": sum(len(p) for p in model.parts), "free_dofs": int(model.free_dofs.size),
-           "assembly_s": assembly, "solvers": {}}
+           "backend": backend, "assembly_s": assembly, "assembly_s_by_backend": by_backend, "solvers": {}}
     ref = None
     for label, method, preconditioner in solvers:
         if method == "cholmod" and not has_cholmod():
@@ -202,7 +220,11 @@ def compare_newton(case, repeats, felupe_repeats, progress=print) -> dict:
     report = {"body": name, **ours}
     if progress:
         progress(f"{name}: one Newton iteration, {law}, {ours['elements']} {element} elements, "
-                 f"{ours['free_dofs']} free dofs; assembly {1e3 * ours['assembly_s']:.1f} ms")
+                 f"{ours['free_dofs']} free dofs; assembly {1e3 * ours['assembly_s']:.1f} ms ({ours['backend']} kernels)")
+        for other, seconds in ours["assembly_s_by_backend"].items():
+            if other != ours["backend"]:
+                text = f"{1e3 * seconds:.1f} ms" if isinstance(seconds, float) else seconds
+                progress(f"  assembly with {other} kernels: {text}")
         for label, r in ours["solvers"].items():
             progress(f"  {label:10s} ({r['used']:9s}) solve {1e3 * r['solve_s']:8.1f} ms (first {1e3 * r['first_solve_s']:7.1f}), "
                      f"assembly + solve {1e3 * r['total_s']:8.1f} ms; {r['iterations']} iterations, "

@@ -44,20 +44,22 @@ PRECONDITIONERS = ("ic", "jacobi", "amg")
 # --------------------------------------------------------------------------- thresholds
 #
 # Measured on the 2-core AMD EPYC (AVX-512) this project benchmarks on, shared with
-# other jobs, best of 3-5 (`tensormass bench steps` and the matrices it builds):
+# other jobs, best of 3-5, on the matrices `tensormass bench steps` builds (one fresh
+# solve each, no factor reuse):
 #
-#   system (free dofs, nnz, bandwidth kd)      band32   band64   SuperLU   CG-Jacobi   CG-IC(0)
-#   3072-hex neo-Hookean K (11 664, 0.80 M, 296)   ~27 ms   ~37 ms   300 ms   185 ms/210 it  190 ms/112 it
-#   10k-tet StVK implicit Euler (6 552, 0.26 M, 278) ~14 ms  ~22 ms   118 ms    64 ms/220 it   42 ms/73 it
-#   20k-hex StVK implicit Euler (64 980, 4.8 M, 1145) ~1.4 s  ~2.7 s    16 s     1.2 s/217 it   0.9 s/69 it
+#   system (free dofs, nnz, bandwidth kd)             band32   SuperLU   CG-Jacobi       CG-IC(0)
+#   3072-hex neo-Hookean K (11 664, 0.80 M, 275)        32 ms    294 ms   114 ms/210 it   132 ms/112 it
+#   10k-tet StVK implicit Euler (6 552, 0.26 M, 278)    14 ms    114 ms    41 ms/220 it    30 ms/73 it
+#   20k-hex StVK implicit Euler (64 980, 4.8 M, 1145)  1.4 s      16 s    0.76 s/217 it   0.58 s/69 it
 #
-# (band32: float32 LAPACK factor + CG refinement to 1e-10; one BLAS thread: with two
-# OpenBLAS threads on the shared cores spbtrf/dpbtrf ran 5-10x slower.)  The band
-# factor costs about n kd^2 / 4e10 s and CG-IC(0) about 150 iterations' worth of
-# matrix-vector products, 150 nnz x 1.1 ns; "auto" takes the band Cholesky when
-# n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz (3072 hexes: 0.9e9 <= 7e9, 10k tets:
-# 0.5e9 <= 2.3e9, 20k hexes: 85e9 > 39e9 -> CG), always below AUTO_DIRECT_BELOW dofs.
-AUTO_BAND_WORK_PER_NNZ = 8_000.0
+# (band32: float32 LAPACK factor + CG refinement to 1e-10 relative residual, one BLAS
+# thread: with two OpenBLAS threads on the shared cores spbtrf/dpbtrf ran 5-10x slower;
+# cholespy 2.1 (CHOLMOD, simplicial) took 480 ms / 170 ms / 32 s, slower than SuperLU.)
+# The band solve costs about n kd^2 x 1.7-3.7e-11 s, CG-IC(0) about nnz x 1.2-1.7e-7 s:
+# "auto" takes the band Cholesky while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz (3072
+# hexes: 1.1e3 x nnz, 10k tets: 2.0e3 x nnz -> band; 20k hexes: 17.5e3 x nnz -> CG),
+# and always below AUTO_DIRECT_BELOW unknowns.
+AUTO_BAND_WORK_PER_NNZ = 6_000.0
 AUTO_DIRECT_BELOW = 3_000
 # "direct" prefers CHOLMOD (scikit-sparse, when installed; fill-reducing orderings beat a
 # band on compact 3D bodies) once the band factor would cost more than this (~0.1 s).
@@ -154,7 +156,8 @@ class LinearSolver:
         self.reuse = bool(reuse)
         self._plan = None
         self._factor = None                      # last band factor (reuse)
-        self._skip_reuse = False
+        self._skip_reuse = 0                     # calls left that refactor without trying reuse
+        self._reuse_backoff = 0
 
     # -- choice -------------------------------------------------------------------------------
     def plan(self, A) -> _BandPlan:
@@ -243,16 +246,19 @@ class LinearSolver:
         """Band Cholesky; with reuse, the previous factor of this pattern preconditions CG first."""
         plan = self.plan(A)
         old = self._factor
-        if self.reuse and old is not None and old.plan is plan and not self._skip_reuse:
-            # worth it while cheaper than half a new factorisation
-            cap = int(min(_REUSE_MAX, max(3, 0.5 * old.seconds / max(old.iteration_s or 1.0, 1e-9))))
-            out = _refine(A, b, old, exact=False, max_iterations=cap)
-            if out is not None:
-                self.last = old.name + "-reuse"
-                return out[0]
-            self._skip_reuse = True                 # the matrix moved on: refactor next time too
-        else:
-            self._skip_reuse = False
+        if self.reuse and old is not None and old.plan is plan:
+            if self._skip_reuse > 0:
+                self._skip_reuse -= 1
+            else:
+                # worth it while cheaper than half a new factorisation
+                cap = int(min(_REUSE_MAX, max(3, 0.5 * old.seconds / max(old.iteration_s or 1.0, 1e-9))))
+                out = _refine(A, b, old, exact=False, max_iterations=cap)
+                if out is not None:
+                    self._reuse_backoff = 0
+                    self.last = old.name + "-reuse"
+                    return out[0]
+                # the matrix moved on (large Newton steps): refactor the next 1, 2, 4, ... times directly
+                self._skip_reuse = self._reuse_backoff = min(2 * self._reuse_backoff + 1, 63)
         self._factor = None
         out = _band_solve(A, b, plan)
         if out is None:

@@ -205,3 +205,24 @@ def test_direct_prefers_cholmod_for_wide_bands(monkeypatch):
     monkeypatch.setattr(solvers, "DIRECT_BAND_WORK_CHOLMOD", 0.0)
     expected = "cholmod" if solvers.has_cholmod() else "band"
     assert LinearSolver("direct").choose(cube) == expected
+
+
+def test_band_factor_reuse():
+    A, b = spd_system(6)
+    solver = LinearSolver("band")
+    solver.solve(A, b)
+    assert solver.last in ("band32", "band64")
+    d = 1 + 1e-6 * np.cos(np.arange(A.shape[0]))   # D A D: same pattern, slightly other values
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    near = sp.csr_matrix((A.data * d[rows] * d[A.indices], A.indices, A.indptr), shape=A.shape)
+    x, _ = solver.solve(near, b)
+    assert solver.last.endswith("-reuse")
+    assert relres(near, x, b) < 1e-9
+    far, _ = spd_system(7)                          # same pattern, unrelated values: refactored
+    far = sp.csr_matrix((far.data, A.indices, A.indptr), shape=A.shape)
+    x, _ = solver.solve(far, b)
+    assert not solver.last.endswith("-reuse") and relres(far, x, b) < 1e-9
+    fresh = LinearSolver("band", reuse=False)
+    fresh.solve(A, b)
+    fresh.solve(near, b)
+    assert not fresh.last.endswith("-reuse")
