@@ -36,7 +36,7 @@ from threadpoolctl import ThreadpoolController
 from .errors import TensormassError
 
 __all__ = ["LinearSolver", "ConstrainedSystem", "DIRECT_LIMIT", "METHODS", "PRECONDITIONERS",
-           "has_cholmod", "has_pyamg"]
+           "has_cholmod", "has_pyamg", "warm_up"]
 
 METHODS = ("auto", "direct", "cg", "band", "cholmod", "lu")
 PRECONDITIONERS = ("ic", "jacobi", "amg")
@@ -759,6 +759,23 @@ def _amg(A):
     return _pyamg.smoothed_aggregation_solver(A.tocsr()).aspreconditioner()
 
 
+_warm = set()
+
+
+def warm_up(index_dtype=np.int32, pointer_dtype=np.int32) -> None:
+    """Load (or compile) the numba loops of every solver path for these index types, once per
+    process: setup time, like the kernels' and the scatter loops' warm-up, not the first solve."""
+    key = (np.dtype(index_dtype).str, np.dtype(pointer_dtype).str)
+    if key in _warm:
+        return
+    A = sp.csr_matrix((np.array([2.0, -1.0, -1.0, 2.0]), np.array([0, 1, 0, 1], dtype=index_dtype),
+                       np.array([0, 2, 4], dtype=pointer_dtype)), shape=(2, 2))
+    b = np.array([1.0, 0.5])
+    for method, preconditioner in (("band", "ic"), ("cg", "ic"), ("cg", "jacobi")):
+        LinearSolver(method, preconditioner=preconditioner, reuse=False).solve(A, b)
+    _warm.add(key)
+
+
 class ConstrainedSystem:
     """Dirichlet conditions by elimination on a fixed global CSR pattern.
 
@@ -770,6 +787,9 @@ class ConstrainedSystem:
         self.pattern, self.free, self.fixed = pattern, free, fixed
         self.ff = pattern.submatrix_map(free, free)
         self.fc = pattern.submatrix_map(free, fixed) if fixed.size else None
+        if free.size:
+            _, indices, indptr, _ = self.ff
+            warm_up(indices.dtype, indptr.dtype)
 
     @staticmethod
     def _block(data, block):
