@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit
 
 from .errors import TensormassError
+from .scene import switch_applies
 
 __all__ = ["CRITERIA", "EDGES", "Adapter", "Change", "criteria", "part_criteria"]
 
@@ -230,13 +231,6 @@ class Adapter:
         self.rules = list(model.adapt)
         self.rounds = [0] * len(self.rules)
         self.tally = _Tally()
-        self._init_groups(model)
-
-    @staticmethod
-    def _init_groups(model):
-        for group in model.groups:
-            if not hasattr(group, "previous"):
-                group.previous = group.current.copy()      # the law a cell came from (switch back)
 
     def due(self, step: int) -> list:
         return [r for r, rule in enumerate(self.rules)
@@ -268,7 +262,6 @@ class Adapter:
         return value * (finite.max() if finite.size else 0.0)
 
     def _switch(self, ctx, step, rules, values) -> int:
-        from .scene import switch_applies
         model, total = ctx.model, 0
         for group in model.groups:
             ids = model.parts[group.parts[0]].cell_ids
@@ -280,9 +273,7 @@ class Adapter:
                 eligible = applies[group.current]
                 up = np.flatnonzero(eligible & ~moved & self._fires(rule, vals, self._level(rule, values, rule.threshold)))
                 if up.size:
-                    before = group.current[up].copy()
                     n = group.switch(model, up, rule.law)
-                    group.previous[up] = before
                     moved[up] = True
                     total += n
                     self.tally.switched += n
@@ -321,7 +312,6 @@ class Adapter:
         laws_now, came_from = _cell_law_names(model)
         new = model.rebuilt(result.mesh)
         new.set_cell_laws(laws_now[result.cell_parent])
-        self._init_groups(new)
         for group in new.groups:                                  # children keep their parent's hysteresis
             parent = result.cell_parent[new.parts[group.parts[0]].cell_ids]
             group.previous = np.array([group.laws.index(law) for law in came_from[parent]], dtype=np.int64)

@@ -19,7 +19,7 @@ from .. import laws
 from . import kernels as _kernels
 from .errors import ElementError, TensormassError
 from .mesh import NODES_PER_CELL, Mesh, boundary_faces, check_mesh, generate_bar, read_mesh
-from .scene import Loads, Output, Solver
+from .scene import Loads, Output, Solver, reachable_laws, switch_parameters
 
 __all__ = ["Model", "Part", "LawGroup", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
 
@@ -89,17 +89,24 @@ class LawGroup:
     """Parts that share the same cells under different laws; each cell is active in exactly one.
 
     Built for the cells a switch_law rule can reach: parts[0] is the material's own law.
-    `current[c]` indexes `laws` (and `parts`) for cell c of the group.
+    `current[c]` indexes `laws` (and `parts`) for cell c of the group; `previous[c]` is the
+    law it had before its last switch (where a switch-back returns it).
     """
     parts: list                  # indices into Model.parts
     laws: list                   # law name of each of those parts
     current: np.ndarray          # (n,) int
+    previous: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.previous is None:
+            self.previous = self.current.copy()
 
     def switch(self, model, cells: np.ndarray, law: str) -> int:
         """Move the given group-local cells to `law`; returns how many changed."""
         target = self.laws.index(law)
         changed = cells[self.current[cells] != target]
         if changed.size:
+            self.previous[changed] = self.current[changed]
             self.current[changed] = target
             for k, i in enumerate(self.parts):
                 model.parts[i].set_active(self.current == k)
@@ -273,7 +280,7 @@ class Model:
         outputs = outputs_for(scene.solver.kind)
         keys = set()
         for (element, law, quad) in _groups(mesh, scene.materials, index):
-            for reach in _reachable_laws(law, getattr(scene, "adapt", ())):
+            for reach in reachable_laws(law, getattr(scene, "adapt", ())):
                 keys.add((element, reach, quad, outputs))
         return keys
 
@@ -287,7 +294,7 @@ class Model:
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
             dofs = (cells[:, :, None] * self.dim + np.arange(self.dim)).reshape(len(cells), -1)
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
-            reach = _reachable_laws(law, self.adapt)
+            reach = reachable_laws(law, self.adapt)
             first = len(parts)
             for k, name in enumerate(reach):
                 # a module attribute lookup, so tests can spy on which kernels get loaded
@@ -304,7 +311,6 @@ class Model:
 
     def _parameters(self, law: str, members) -> dict:
         """Native law parameters, one value per cell (materials may differ within a part)."""
-        from .scene import switch_parameters
         columns: dict = {}
         for _, ids, m in members:
             mat = self.materials[m]
@@ -435,22 +441,6 @@ class Model:
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
         return {name: U[node].tolist() for name, node in self.probes.items()}
-
-
-def _reachable_laws(law: str, rules) -> list:
-    """The material's law first, then every law a switch_law rule can move its cells to (in rule order).
-
-    Reachability is transitive (hooke -> stvk -> stable_neohookean)."""
-    from .scene import switch_applies
-    reach = [law]
-    grew = True
-    while grew:
-        grew = False
-        for rule in rules:
-            if rule.action == "switch_law" and rule.law not in reach and any(switch_applies(rule, x) for x in reach):
-                reach.append(rule.law)
-                grew = True
-    return reach
 
 
 def _face_measure(points, nodes, dim) -> float:

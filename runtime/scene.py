@@ -805,12 +805,11 @@ def _check_adapt(scene: Scene, mesh, which) -> None:
             if bad:
                 raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
             continue
-        from .model import _reachable_laws
         for blk, w in zip(mesh.blocks, which):
             for i in np.unique(w):
                 m = scene.materials[int(i)]
                 # chains count: hooke -> stvk -> neohookean reaches neohookean through rule 1
-                if rule.law not in _reachable_laws(m.law, scene.adapt)[1:]:
+                if rule.law not in reachable_laws(m.law, scene.adapt)[1:]:
                     continue
                 _catalogue_check(f"{key}.law", blk.type, rule.law, m.quadrature)
                 try:
@@ -822,6 +821,21 @@ def _check_adapt(scene: Scene, mesh, which) -> None:
 def switch_applies(rule: Adapt, law: str) -> bool:
     """Whether a switch_law rule moves elements that are under `law`."""
     return rule.action == "switch_law" and law != rule.law and rule.from_law in (None, law)
+
+
+def reachable_laws(law: str, rules) -> list:
+    """The material's law first, then every law switch_law rules can move its cells to (in rule order).
+
+    Reachability is transitive (hooke -> stvk -> stable_neohookean)."""
+    reach = [law]
+    grew = True
+    while grew:
+        grew = False
+        for rule in rules:
+            if rule.action == "switch_law" and rule.law not in reach and any(switch_applies(rule, x) for x in reach):
+                reach.append(rule.law)
+                grew = True
+    return reach
 
 
 def switch_parameters(material: Material, law_name: str) -> dict:

@@ -312,3 +312,18 @@ def test_user_scene_settings_cli(tmp_path, monkeypatch):
         run_accuracy(tmp_path / "o", elements=["tetra"], progress=None)
     assert parser.parse_args(["accuracy", "--benchmark", "shear", "torsion", "--out", "d"]).benchmark == [
         "shear", "torsion"]
+
+
+def test_adaptive_benchmarks(tmp_path):
+    """adaptive_beam: adaptive hooke->stvk within 1 % of all-stvk where all-hooke is visibly off;
+    refinement: R_S refinement from the coarsest mesh beats that mesh."""
+    rows = run_accuracy(tmp_path / "out", quick=True, progress=lambda *_: None,
+                        benchmarks=["adaptive_beam", "refinement"])
+    static = {r["law"]: r for r in rows if r["benchmark"] == "adaptive_beam" and r["case"] == "static"}
+    assert static["stvk"]["error_reference"] == 0
+    assert static["hooke"]["error_reference"] > 0.02
+    assert static["adaptive hooke->stvk"]["error_reference"] < 0.01
+    refine = {r["case"]: r for r in rows if r["benchmark"] == "refinement"}
+    adaptive = [r for case, r in refine.items() if case.startswith("R_S")]
+    assert adaptive and all(r["error_reference"] < refine["uniform 12x2"]["error_reference"] for r in adaptive)
+    assert "## Benchmark `adaptive_beam`" in (tmp_path / "out" / "report.md").read_text()

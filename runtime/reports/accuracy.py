@@ -511,7 +511,9 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    from .benchmarks import BENCHMARKS
+    from .adaptive import BENCHMARKS as ADAPTIVE
+    from .benchmarks import BENCHMARKS as CLASSIC
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

@@ -565,7 +565,5 @@ def torsion(quick, progress, sweep=None) -> dict:
     return _cube_benchmark("torsion", quick, progress, sweep)
 
 
-from .adaptive import adaptive_beam, refinement  # noqa: E402 - it builds on the helpers above
-
 BENCHMARKS = {"beam2d": beam2d, "volume": volume, "mixed": mixed, "large_deflection": large_deflection,
-              "shear": shear, "torsion": torsion, "adaptive_beam": adaptive_beam, "refinement": refinement}
+              "shear": shear, "torsion": torsion}
