@@ -194,9 +194,8 @@ def criteria(model, u: np.ndarray, names, asm=None) -> dict:
     for part in model.parts:
         if part.n_active == 0:
             continue
-        ids = part.cell_ids if part.index is None else part.cell_ids[part.index]
         for name, values in part_criteria(model, part, u, names, asm).items():
-            out[name][ids] = values
+            out[name][part.cell_ids_active] = values
     return out
 
 
@@ -330,11 +329,11 @@ class Adapter:
             per_law[p.law] = per_law.get(p.law, 0) + p.n_active
         return {"rules": len(self.rules), "switched": self.tally.switched,
                 "switched_back": self.tally.switched_back, "split": self.tally.split,
-                "elements_per_law": dict(sorted(per_law.items())), "time": self.tally.time,
-                "events": list(self.tally.events)}
+                "elements_per_law": dict(sorted(per_law.items())), "law_ids": model.law_names(),
+                "time": self.tally.time, "events": list(self.tally.events)}
 
     def cell_fields(self, ctx) -> dict:
-        """A cell field per criterion, plus `law_id` (index into the sorted law names of the model)."""
+        """A cell field per criterion, plus `law_id` (index into model.law_names(); -1: no material)."""
         values = {name: np.where(np.isfinite(v), v, -1.0)          # -1: undefined (e.g. collapsed)
                   for name, v in criteria(ctx.model, ctx.u, CRITERIA, ctx.asm).items()}
         values["law_id"] = ctx.model.cell_law().astype(float)
@@ -343,10 +342,7 @@ class Adapter:
 
 def _cell_law_names(model) -> tuple:
     """(current law, law it came from) of every cell, by name, in global cell order."""
-    names = np.empty(model.mesh.n_cells, dtype=object)
-    for p in model.parts:
-        ids = p.cell_ids if p.index is None else p.cell_ids[p.index]
-        names[ids] = p.law
+    names = model.cell_laws()
     came_from = names.copy()
     for group in model.groups:
         came_from[model.parts[group.parts[0]].cell_ids] = np.asarray(group.laws, dtype=object)[group.previous]

@@ -334,8 +334,7 @@ def _global_ids(part, call):
         return call()
     except ElementError as exc:
         message = str(exc).rsplit(": element(s)", 1)[0]
-        ids = part.cell_ids if part.index is None else part.cell_ids[part.index]
-        raise type(exc)(message, ids[exc.elements]) from None
+        raise type(exc)(message, part.cell_ids_active[exc.elements]) from None
 
 
 def assemble(model, u: np.ndarray, project=False):

@@ -68,8 +68,7 @@ class Context:
             if laws.get(p.law).requires_positive_J and p.n_active:
                 bad = p.kernel.inverted(p.D_active, self.model.element_displacements(p, u))
                 if bad.any():
-                    ids = p.cell_ids if p.index is None else p.cell_ids[p.index]
-                    raise InvertedElementError(f"law {p.law!r}: det F <= 0", ids[bad])
+                    raise InvertedElementError(f"law {p.law!r}: det F <= 0", p.cell_ids_active[bad])
 
 
 # --------------------------------------------------------------------------- Newton

@@ -70,6 +70,7 @@ class Part:
         self.D_active = self.D if everything else self.D[self.index]
         self.cells_active = self.cells if everything else self.cells[self.index]
         self.dofs_active = self.dofs if everything else self.dofs[self.index]
+        self.cell_ids_active = self.cell_ids if everything else self.cell_ids[self.index]
 
     def set_active(self, mask: np.ndarray) -> None:
         """Change which cells this part's law models (law switching); constants are kept for all."""
@@ -430,13 +431,21 @@ class Model:
                  "backend": p.kernel.backend, "outputs": list(self.outputs), "elements": p.n_active}
                 for p in self.parts]
 
-    def cell_law(self) -> np.ndarray:
-        """Law name index (into sorted law names of the parts) of every cell, -1 where none."""
-        names = sorted({p.law for p in self.parts})
-        out = np.full(self.mesh.n_cells, -1, dtype=np.int64)
+    def law_names(self) -> list:
+        """Sorted names of the laws the parts carry: what a `law_id` indexes."""
+        return sorted({p.law for p in self.parts})
+
+    def cell_laws(self) -> np.ndarray:
+        """The law name modelling every cell (object array, None where no material), global order."""
+        out = np.full(self.mesh.n_cells, None, dtype=object)
         for p in self.parts:
-            out[p.cell_ids[p.active]] = names.index(p.law)
+            out[p.cell_ids_active] = p.law
         return out
+
+    def cell_law(self) -> np.ndarray:
+        """Law id of every cell: index into law_names(), -1 where no material."""
+        ids = {law: i for i, law in enumerate(self.law_names())}
+        return np.array([ids.get(law, -1) for law in self.cell_laws()], dtype=np.int64)
 
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
