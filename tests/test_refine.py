@@ -1,5 +1,4 @@
 """Tests for tensormass.runtime.refine: conforming longest-edge bisection of triangles and tetrahedra."""
-import time
 
 import numpy as np
 import pytest
@@ -276,12 +275,11 @@ def test_deterministic(propagate):
     assert a.n_split == b.n_split
 
 
-def test_refining_a_fifth_of_6000_tets_is_fast():
+def test_refining_a_fifth_of_6000_tets():
+    # speed is a benchmark matter (no timed unit tests): 18-26 ms here, 72-178 ms with propagation
     m = generate_bar((1.0, 1.0, 1.0), (10, 10, 10), "tetra")
     assert m.n_cells == 6000
     marked = np.random.default_rng(0).random(m.n_cells) < 0.2
-    t = time.perf_counter()
     r = refine(m, marked)
-    elapsed = time.perf_counter() - t
     assert r.n_split >= marked.sum()
-    assert elapsed < 1.0, f"refine took {elapsed:.2f} s"              # observed ~0.03 s
+    check_mesh(r.mesh)
