@@ -129,6 +129,11 @@ class Solver:
     rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)
     project_psd: bool | None = None       # None: plain Newton, projection switched on when a step fails to descend
     backend: str = "numba"                # kernel backend: numba | c
+    # Health monitor (runtime/health.py): when a run leaves the trusted region
+    health_monitor: bool = True           # false: no checks (a run may then end in a meaningless state)
+    max_energy_growth: float = 100.0      # stop when the energy balance grows by this x the scene's energy scale
+    max_displacement: float = 10.0        # stop when a node moves this x the body size away from the mean motion
+    on_inversion: str = "warn"            # inverted elements (laws defined there): "warn" (invalid at the end) | "stop"
 
 
 @dataclass
@@ -307,7 +312,8 @@ _FIXED = ("box", "displacement", "components")
 _LOADS = ("gravity", "force", "traction")
 _LOAD = ("box", "value")
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
-           "newton_max_iterations", "rayleigh", "project_psd", "backend")
+           "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
+           "max_displacement", "on_inversion")
 _PROBE = ("name", "point")
 _OUTPUT = ("dir", "every")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
@@ -316,6 +322,7 @@ ADAPT_ACTIONS = ("switch_law", "refine")
 
 SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
 LINEAR_SOLVERS = ("auto", "direct", "cg")
+INVERSION_ACTIONS = ("warn", "stop")
 BACKENDS = ("numba", "c")
 GENERATORS = ("bar",)
 ELEMENTS_3D = ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed")
@@ -640,6 +647,13 @@ class _Parser:
             s.project_psd = self.boolean(t["project_psd"], "solver.project_psd")
         if "backend" in t:
             s.backend = self.string(t["backend"], "solver.backend", BACKENDS)
+        if "health_monitor" in t:
+            s.health_monitor = self.boolean(t["health_monitor"], "solver.health_monitor")
+        for k in ("max_energy_growth", "max_displacement"):
+            if k in t:
+                setattr(s, k, self.number(t[k], f"solver.{k}", positive=True))
+        if "on_inversion" in t:
+            s.on_inversion = self.string(t["on_inversion"], "solver.on_inversion", INVERSION_ACTIONS)
         return s
 
     def probe(self, t, key, index) -> Probe:
