@@ -18,6 +18,7 @@ import scipy.sparse.linalg as spla
 from .. import laws
 from .assembly import Assembler
 from .errors import InvertedElementError, TensormassError
+from .health import safe_norm
 from .solvers import ConstrainedSystem, LinearSolver
 
 __all__ = ["Context", "make_integrator", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
@@ -101,7 +102,7 @@ class _Potential:
 
     def force_scale(self, u):
         """Forces that set the convergence tolerance: the external load (plus inertia, below)."""
-        return np.linalg.norm(self.f_ext[self.free])
+        return safe_norm(self.f_ext[self.free])
 
     def hessian(self, u, project):
         return self.asm.stiffness(u, project)
@@ -129,7 +130,7 @@ class _IncrementalPotential(_Potential):
     def force_scale(self, u):
         # a body moving without load still needs a force scale: its inertia forces
         _, dq, _ = self.extra(u)
-        return max(super().force_scale(u), np.linalg.norm(dq[self.free]))
+        return max(super().force_scale(u), safe_norm(dq[self.free]))
 
     def hessian(self, u, project):
         data = self.asm.stiffness(u, project)
@@ -154,8 +155,12 @@ def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndar
         du_c = target_c - u[fixed]
         moving = bool(np.any(du_c))
         # reactions (gradient on fixed dofs) set the force scale when there is no load
-        scale = max(force_scale, np.linalg.norm(g[fixed]))
-        res = np.linalg.norm(g[free])
+        scale = max(force_scale, safe_norm(g[fixed]))
+        res = safe_norm(g[free])
+        if not (np.isfinite(res) and np.isfinite(scale)):
+            # inf <= tol * inf would pass the test below: a load or state beyond float range is no solution
+            raise TensormassError(f"{where}: the residual or the load is not finite (|residual| = {res:.3g}, "
+                                  f"|load| = {scale:.3g}): loads or displacements beyond floating-point range")
         if not moving and res <= s.newton_tolerance * scale:
             return u, it - 1
         try:
@@ -187,7 +192,7 @@ def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndar
         g = potential.gradient(u) if g_new is None else g_new
         if tiny and not np.any(target_c - u[fixed]):
             return u, it
-    res = np.linalg.norm(g[free])
+    res = safe_norm(g[free])
     raise TensormassError(f"{where}: Newton did not converge in {s.newton_max_iterations} iterations "
                           f"(residual {res:.3e}, tolerance {s.newton_tolerance * scale:.3e}); "
                           "use more steps or a larger newton_max_iterations")
@@ -214,7 +219,7 @@ def _line_search(potential, u, d, g, Pi0, mag0, slope, moving):
         if a == 1.0 and not moving and abs(Pi - Pi0) <= _NOISE * max(mag, mag0):
             g_trial = potential.gradient(trial)
             free = potential.free
-            if np.linalg.norm(g_trial[free]) <= 0.5 * np.linalg.norm(g[free]):
+            if safe_norm(g_trial[free]) <= 0.5 * safe_norm(g[free]):
                 return trial, a, Pi, mag, g_trial
         a *= 0.5
     return None
@@ -378,6 +383,10 @@ class Explicit(_Dynamic):
         huge = finite and np.abs(u).max() > 1e3 * self.model.size
         if finite and not huge and self._growth < 20:
             return
+        raise TensormassError(f"explicit integration unstable at step {k}: {self.instability_hint()}")
+
+    def instability_hint(self) -> str:
+        """Why an explicit run diverges: dt against the stable step estimated at rest."""
         crit = self.stable_dt
         if crit is not None and self.dt > crit:
             why = f"dt = {self.dt:.3g} exceeds the estimated stable step {crit:.3g}"
@@ -386,8 +395,7 @@ class Explicit(_Dynamic):
                    "but the deformed body is stiffer")
         else:
             why = f"dt = {self.dt:.3g} is probably above the stable step"
-        raise TensormassError(f"explicit integration unstable at step {k}: {why}; reduce dt or use "
-                              "implicit_euler / backward_euler")
+        return f"{why}; reduce dt or use implicit_euler / backward_euler"
 
 
 def _stiffness_times(asm, u, x, f_int, size):

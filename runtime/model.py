@@ -23,9 +23,10 @@ from .scene import Loads, Output, Solver, reachable_laws, switch_parameters
 
 __all__ = ["Model", "Part", "LawGroup", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
 
-# Kernel outputs each solver kind calls; energy only serves the line search and reports.
+# Kernel outputs each solver kind calls; energy serves the line search, the health monitor's
+# energy balance and reports (explicit runs evaluate it every few steps only).
 _OUTPUTS = {
-    "explicit": ("forces",),
+    "explicit": ("forces", "energy"),
     "implicit_euler": ("energy", "forces", "stiffness"),
     "backward_euler": ("energy", "forces", "stiffness"),
     "static": ("energy", "forces", "stiffness"),

@@ -16,11 +16,25 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .adapt import MAX_STATIC_PASSES, Adapter
-from .errors import TensormassError
+from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, RunStopped,
+                     TensormassError)
+from .health import HealthMonitor
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
 
 __all__ = ["Simulation", "Summary"]
+
+
+# Per-step history entries kept in memory: past this, every other entry is dropped and the
+# stride doubles, so a run of any length keeps between HISTORY_MAX/2 and HISTORY_MAX rows.
+HISTORY_MAX = 4096
+# Explicit steps are cheap (one forces call): their elastic energy, which a force kernel does not
+# give, is evaluated every this many steps (and at every frame and the last step), not every step.
+EXPLICIT_ENERGY_EVERY = 10
+_HISTORY_KEYS = ("step", "time", "newton", "wall", "elastic", "kinetic", "external_work")
+# Exit code of each final status (runtime.errors: 0 trusted, 3 not trusted, 130 interrupted).
+_EXIT = {"ok": EXIT_OK, "warnings": EXIT_OK, "invalid": EXIT_UNTRUSTED, "diverged": EXIT_UNTRUSTED,
+         "failed": EXIT_UNTRUSTED, "interrupted": EXIT_INTERRUPTED}
 
 
 @dataclass
@@ -36,20 +50,60 @@ class Summary:
     time: dict
     iterations: dict
     probes: dict
-    energy: float | None                  # final elastic energy (None: explicit loads no energy kernel)
+    energy: float | None                  # final elastic energy (None: not evaluated at the last step)
     kinetic_energy: float | None          # final, dynamic solvers only
     stable_dt: float | None               # explicit only: estimated critical step at rest
     per_step: dict = field(default_factory=dict)
     adapt: dict | None = None             # [[adapt]] rules: switches, splits and their events
+    status: str = "ok"                    # ok | warnings | invalid | diverged | failed | interrupted
+    message: str | None = None            # why the run is not "ok"/"warnings"
+    warnings: list = field(default_factory=list)   # [{"step", "time", "kind", "message"}]
+    health: dict = field(default_factory=dict)     # runtime.health.HealthMonitor.summary()
+    steps_done: int = 0                   # steps finished (== steps unless the run stopped)
+
+    @property
+    def exit_code(self) -> int:
+        return _EXIT[self.status]
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        out["exit_code"] = self.exit_code
+        return out
 
     def __getitem__(self, key):
         return getattr(self, key)
 
     def keys(self):
         return self.to_dict().keys()
+
+
+class _History:
+    """Per-step values, bounded: rows of the steps that are multiples of `stride` (plus the running totals)."""
+
+    def __init__(self):
+        self.rows = {k: [] for k in _HISTORY_KEYS}
+        self.stride = 1
+        self.wall_total = 0.0
+        self.first_wall = None
+        self.last = {}
+
+    def add(self, row: dict) -> None:
+        self.wall_total += row["wall"]
+        if self.first_wall is None:
+            self.first_wall = row["wall"]
+        self.last = row
+        if row["step"] % self.stride:
+            return
+        for key in _HISTORY_KEYS:
+            self.rows[key].append(row[key])
+        if len(self.rows["step"]) > HISTORY_MAX:
+            self.stride *= 2
+            keep = [i for i, k in enumerate(self.rows["step"]) if k % self.stride == 0]
+            for key in _HISTORY_KEYS:
+                self.rows[key] = [self.rows[key][i] for i in keep]
+
+    def to_dict(self) -> dict:
+        return dict(self.rows, stride=self.stride)
 
 
 class Simulation:
@@ -110,41 +164,80 @@ class Simulation:
             ctx.v = self._v0.copy()
         if isinstance(self.integrator, Explicit):
             self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
+        self.monitor = HealthMonitor(ctx, dynamic=model.solver.kind != "static",
+                                     duration=getattr(self.integrator, "duration", None))
         ctx.asm.time = ctx.linear.time = 0.0         # stepping costs only from here on
 
     def run(self) -> Summary:
+        """Step the scene; the Summary of a run we stand behind (status "ok" or "warnings").
+
+        Raises RunStopped (status "diverged", "failed" or "invalid") or RunInterrupted
+        (Ctrl-C), each carrying the Summary up to the last finished step; errors
+        before the first step (bad input) are plain TensormassErrors.
+        """
         start = time.perf_counter()
+        self._step = 0
+        self._history = _History()
+        stopped = None
         try:
             self._prepare()
             setup = self._setup + time.perf_counter() - start
-            history = self._loop()
+            try:
+                self._loop()
+                status, message = self.monitor.verdict()
+                if status == "invalid":
+                    stopped = RunStopped, status, message
+            except _WriterFailed as failure:              # disk full, permissions: the environment, not the run
+                raise failure.error from None
+            except _Stop as stop:
+                stopped = RunStopped, "diverged", stop.message
+            except KeyboardInterrupt:
+                stopped = RunInterrupted, "interrupted", f"interrupted (Ctrl-C) after step {self._step}"
+            except (ValueError, ArithmeticError) as exc:          # TensormassError, a failed step, LinAlgError
+                stopped = RunStopped, "failed", f"step {self._step + 1} failed: {exc}"
+            if stopped is not None:
+                _, status, message = stopped
+                if self.writer is not None and hasattr(self.writer, "mark_stopped"):
+                    self.writer.mark_stopped(self._step, f"run {status}: {message}")
         finally:
             if self.writer is not None:
                 self.writer.close()
-        total = setup + sum(history["wall"])
-        self.summary = self._summarise(setup, total, history)
+        self.summary = self._summarise(setup, status, message)
+        if stopped is not None:
+            kind = stopped[0]
+            error = kind(message, self.summary) if kind is RunInterrupted else kind(message, self.summary, status)
+            raise error
         return self.summary
 
-    def _loop(self) -> dict:
+    def _loop(self) -> None:
         integ, model = self.integrator, self.model
-        history = {k: [] for k in ("time", "newton", "wall", "elastic", "kinetic", "external_work")}
-        self._write(0)
+        energies = self._energies(0)
+        self.monitor.start(self.ctx, energies)
+        self._write(0, None)
         for k in range(1, integ.n_steps + 1):
             t0 = time.perf_counter()
             info = integ.step(k)
             if self.adapter is not None:
                 self._adapt(k)
                 integ, model = self.integrator, self.model      # refinement rebuilds both
-            history["wall"].append(time.perf_counter() - t0)
-            history["time"].append(info["time"])
-            history["newton"].append(info["newton"])
-            for key, value in self._energies().items():
-                history[key].append(value)
-            if k % max(model.output.every, 1) == 0 or k == integ.n_steps:
-                self._write(k)
+                self.monitor.model = model
+            wall = time.perf_counter() - t0
+            frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
+            energies = self._energies(k, frame)
+            check = self.monitor.check(self.ctx, k, energies)
+            if check.stop:
+                raise _Stop(check.stop + self._hint(k))
+            self._step = k
+            self._history.add({"step": k, "time": info["time"], "newton": info["newton"], "wall": wall, **energies})
+            if frame:
+                self._write(k, check.flag)
             if self.progress is not None:
                 self.progress(k, integ.n_steps)
-        return history
+
+    def _hint(self, k: int) -> str:
+        """What the integrator can say about a divergence (explicit: dt against the stable step)."""
+        hint = getattr(self.integrator, "instability_hint", None)
+        return f"; explicit integration unstable at step {k}: {hint()}" if hint is not None else ""
 
     # -- adaptation -----------------------------------------------------------------------------
     def _adapt(self, k: int) -> None:
@@ -182,35 +275,69 @@ class Simulation:
         if self.writer is not None and hasattr(self.writer, "set_mesh"):
             self.writer.set_mesh(model.mesh)
 
-    def _energies(self) -> dict:
-        """Elastic, kinetic and external work at the current state (not counted as assembly time)."""
-        ctx, model = self.ctx, self.model
-        saved = ctx.asm.time
-        elastic = ctx.asm.energy(ctx.u) if "energy" in model.outputs else None
-        ctx.asm.time = saved
-        kinetic = 0.5 * float(ctx.v @ (model.mass * ctx.v)) if model.solver.kind != "static" else None
-        return {"elastic": elastic, "kinetic": kinetic, "external_work": float(model.f_ext @ ctx.u)}
+    def _energies(self, step: int, frame: bool = True) -> dict:
+        """Elastic, kinetic and external work at the current state (not counted as assembly time).
 
-    def _write(self, step: int):
+        Explicit runs evaluate the elastic energy only every EXPLICIT_ENERGY_EVERY steps and on frames.
+        """
+        ctx, model = self.ctx, self.model
+        explicit = isinstance(self.integrator, Explicit)
+        due = not explicit or frame or step % EXPLICIT_ENERGY_EVERY == 0
+        elastic = None
+        if "energy" in model.outputs and due:
+            saved = ctx.asm.time
+            try:
+                elastic = ctx.asm.energy(ctx.u)
+            finally:
+                ctx.asm.time = saved
+        kinetic = 0.5 * float(ctx.v @ (model.mass * ctx.v)) if model.solver.kind != "static" else None
+        with np.errstate(over="ignore", invalid="ignore"):
+            work = float(model.f_ext @ ctx.u)
+        return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
+
+    def _write(self, step: int, flag):
         if self.writer is None:
             return
         fields = {} if self.model.solver.kind == "static" else {"velocity": self.velocity}
-        if self.adapter is None:
-            self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields)
-        else:                                # watch the criteria and the law of each cell in ParaView
-            self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields,
-                                    cell_fields=self.adapter.cell_fields(self.ctx))
+        # only the keywords in use, so simple writers (write_frame(step, t, X, u, fields)) keep working
+        extra = {} if flag is None else {"flag": flag}
+        if self.adapter is not None:          # watch the criteria and the law of each cell in ParaView
+            extra["cell_fields"] = self.adapter.cell_fields(self.ctx)
+        try:
+            self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields, **extra)
+        except Exception as exc:
+            raise _WriterFailed(exc) from exc
 
-    def _summarise(self, setup, total, history) -> Summary:
-        ctx, model = self.ctx, self.model
-        last = lambda key: history[key][-1] if history[key] else None  # noqa: E731
+    def _summarise(self, setup, status, message) -> Summary:
+        ctx, model, h = self.ctx, self.model, self._history
+        last = h.last
+        n_steps = self.integrator.n_steps if getattr(self, "integrator", None) is not None else 0
         return Summary(
-            name=model.name, solver=model.solver.kind, steps=self.integrator.n_steps,
+            name=model.name, solver=model.solver.kind, steps=n_steps,
             n_dofs=model.n_dofs, n_free_dofs=int(model.free_dofs.size),
             n_elements=model.n_elements, kernels=model.kernel_info(),
-            time={"setup": setup, "first_step": history["wall"][0] if history["wall"] else 0.0,
-                  "assembly": ctx.asm.time, "linear_solve": ctx.linear.time, "total": total},
+            time={"setup": setup, "first_step": h.first_wall or 0.0,
+                  "assembly": ctx.asm.time, "linear_solve": ctx.linear.time,
+                  "health": self.monitor.time, "total": setup + h.wall_total},
             iterations={"newton": ctx.newton_iterations, "linear": ctx.linear_iterations},
-            probes=model.probe_values(ctx.u), energy=last("elastic"), kinetic_energy=last("kinetic"),
-            stable_dt=self.stable_dt, per_step=history,
-            adapt=None if self.adapter is None else self.adapter.summary(model))
+            probes=model.probe_values(ctx.u), energy=last.get("elastic"), kinetic_energy=last.get("kinetic"),
+            stable_dt=self.stable_dt, per_step=h.to_dict(),
+            adapt=None if self.adapter is None else self.adapter.summary(model),
+            status=status, message=message, warnings=list(self.monitor.warnings),
+            health=self.monitor.summary(), steps_done=self._step)
+
+
+class _Stop(Exception):
+    """The health monitor's verdict inside the step loop (becomes RunStopped with the summary)."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+
+class _WriterFailed(Exception):
+    """Writing a frame failed (disk full, permissions): re-raised as it was, not as a failed step."""
+
+    def __init__(self, error: Exception):
+        super().__init__(str(error))
+        self.error = error

@@ -450,8 +450,8 @@ def test_explicit_scene_uses_the_kernel_and_switches():
     sim = tm.Simulation(scene)
     summary = sim.run()
     assert sim.ctx.asm.constant == [False, False]            # no stiffness kernel for explicit
-    assert summary.adapt["switched"] > 0 and summary.energy is None
-    assert all(k["outputs"] == ["forces"] for k in summary.kernels)
+    assert summary.adapt["switched"] > 0 and summary.energy is not None     # energy: the health balance
+    assert all(k["outputs"] == ["forces", "energy"] for k in summary.kernels)
 
 
 # --------------------------------------------------------------------------- 4. hysteresis and rule options

@@ -8,7 +8,7 @@ import pytest
 
 from tensormass.runtime import kernels as kernels_module
 from tensormass.runtime.assembly import Assembler, assemble, colour_elements, project_psd
-from tensormass.runtime.errors import TensormassError
+from tensormass.runtime.errors import RunStopped, TensormassError
 from tensormass.runtime.integrators import Context, stable_time_step
 from tensormass.runtime.mesh import generate_bar
 from tensormass.runtime.model import Model
@@ -88,12 +88,23 @@ def test_nonlinear_static_converges_quadratically(law):
     assert abs(tip(summary) - hooke) / hooke < 0.01    # small load: close to linear
 
 
-@pytest.mark.parametrize("law", ["stvk", "neohookean"])
-def test_large_load_with_load_stepping(law):
-    summary = Simulation(beam(law=law, gravity=150 * G * 10, steps=3, newton_max_iterations=40)).run()
+def test_large_load_with_load_stepping():
+    summary = Simulation(beam(law="neohookean", gravity=150 * G * 10, steps=3, newton_max_iterations=40)).run()
     assert np.all(np.isfinite(summary.probes["tip"]))
     assert tip(summary) > 0.5 * L                        # large deflection, far beyond linear range
     assert summary.per_step["newton"][-1] <= 8
+    assert summary.status == "ok" and summary.health["min_det_F"] > 0
+
+
+def test_stvk_collapse_under_a_huge_load_is_not_a_result():
+    # StVK softens in compression: under this load its elements invert near the clamp, an
+    # equilibrium of the formula but not of a material; the run must say so (exit code 3)
+    with pytest.raises(RunStopped, match="inverted") as info:
+        Simulation(beam(law="stvk", gravity=150 * G * 10, steps=3, newton_max_iterations=40)).run()
+    summary = info.value.summary
+    assert info.value.status == "invalid" and summary.exit_code == 3
+    assert summary.health["inverted_final"] > 0 and summary.health["min_det_F_final"] <= 0
+    assert any(w["kind"] == "inverted" for w in summary.warnings)
 
 
 def test_psd_projection_only_when_asked():
@@ -188,7 +199,8 @@ def test_inverting_implicit_step_retries_then_stops_clearly():
 
 def test_required_kernels_follow_the_solver():
     explicit = Model.required_kernels(beam(kind="explicit"))
-    assert explicit == {("hexahedron", "hooke", "gauss2", ("forces",))}
+    # explicit: forces to step, energy for the health monitor's energy balance; never stiffness
+    assert explicit == {("hexahedron", "hooke", "gauss2", ("forces", "energy"))}
     static = Model.required_kernels(beam("mixed", law="stvk"))
     assert {k[0] for k in static} == {"hexahedron", "wedge", "pyramid", "tetra"}
     assert all(k[3] == ("energy", "forces", "stiffness") for k in static)
@@ -205,7 +217,7 @@ def test_hooke_scene_loads_no_other_kernel(monkeypatch):
     monkeypatch.setattr(kernels_module, "load_kernel", spy)
     summary = Simulation(beam(kind="explicit", steps=2, dt=1e-4)).run()
     assert loaded == [("hexahedron", "hooke", "gauss2")]
-    assert summary.kernels[0]["outputs"] == ["forces"] and summary.energy is None
+    assert summary.kernels[0]["outputs"] == ["forces", "energy"] and summary.energy is not None
 
 
 def test_materials_by_region_and_box():

@@ -2,11 +2,16 @@
 
     rows = run_stability("out", quick=True)     # writes out/stability.csv and out/report.md
 
-Every case runs on a tiny mesh with few steps and ends in one of four outcomes:
+Every case runs on a tiny mesh with few steps and ends in one of five outcomes, classified by
+the runtime's own health monitor (runtime/health.py), never by a separate judgement:
 
-    stable               the run finished, every value finite and bounded
-    recovered            the run finished and the body returned close to its rest shape
-    diverged (detected)  the runtime stopped with an error (instability, failed step) - no silent NaN
+    stable               the run finished and the monitor trusts it (status "ok": finite, bounded
+                         energy and displacement, no inverted element)
+    recovered            the run finished (status "ok" or "warnings": e.g. elements inverted on
+                         the way, none at the end) and the body returned close to its rest shape
+    invalid (detected)   the run finished, but the monitor rejects its final state (inverted
+                         elements): exit code 3 on the command line
+    diverged (detected)  the runtime stopped the run (monitor: blow-up; or a failed step)
     refused (reason)     the scene, mesh or initial state was rejected before stepping
 
 A case is ``ok`` when its outcome is one of those its expectation allows (and any extra
@@ -23,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import health
 from ..errors import TensormassError
 from ..output import write_text_atomic
 
@@ -32,6 +38,7 @@ COLUMNS = ("case", "law", "integrator", "dt", "outcome", "expected", "ok", "max_
            "min_det_F", "newton_iterations", "linear_iterations", "wall_time", "message")
 
 STABLE, RECOVERED, DIVERGED = "stable", "recovered", "diverged (detected)"
+INVALID = "invalid (detected)"
 GRAVITY = 9.81
 BAR = (1.0, 0.2, 0.2)
 
@@ -63,21 +70,8 @@ def _scene_dict(law="stvk", kind="implicit_euler", dt=1.0 / 60, steps=5, E=1e6, 
 
 
 def min_det_F(model, u) -> float:
-    """Smallest det F over every integration point of every element (precomputed shape gradients)."""
-    out = math.inf
-    for part in model.parts:
-        k = part.kernel
-        if getattr(k, "recompute", False):
-            continue
-        ue = model.element_displacements(part, np.asarray(u, dtype=float))
-        n, stride = part.n_active, 1 + k.n_dofs
-        for q in range(k.n_points):
-            G = part.D_active[:, q * stride + 1:(q + 1) * stride].reshape(n, k.n_nodes, k.dim)
-            F = np.eye(k.dim) + np.einsum("eia,eib->eab", ue, G)
-            d = np.linalg.det(F)
-            if d.size:
-                out = min(out, float(np.min(d)))
-    return out
+    """Smallest det F over every integration point of every element: the health monitor's measure."""
+    return health.min_det_F(model, np.asarray(u, dtype=float))[0]
 
 
 def _short(exc_or_text, limit=110) -> str:
@@ -124,7 +118,6 @@ class _Run:
         u = self.sim.ctx.u
         if np.all(np.isfinite(u)):
             self.max_u = max(self.max_u, float(np.abs(u).max()) if u.size else 0.0)
-            self.min_det = min(self.min_det, min_det_F(self.sim.model, u))
 
     def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
         """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
@@ -146,7 +139,12 @@ class _Run:
             if sim.ctx is not None:
                 self.row["newton_iterations"] = sim.ctx.newton_iterations
                 self.row["linear_iterations"] = sim.ctx.linear_iterations
-            return self._finish(DIVERGED, f"{type(exc).__name__}: {exc}")
+            stopped = getattr(exc, "summary", None)
+            if stopped is not None:
+                self._health(stopped)
+            outcome = INVALID if getattr(exc, "status", None) == "invalid" else DIVERGED
+            return self._finish(outcome, f"{type(exc).__name__}: {exc}")
+        self._health(summary)
         self.row["newton_iterations"] = summary.iterations["newton"]
         self.row["linear_iterations"] = summary.iterations["linear"]
         energies = [e for e in summary.per_step.get("elastic", []) if e is not None]
@@ -157,10 +155,21 @@ class _Run:
                                 force_fail=True)
         if energies:
             self.row["max_energy"] = _num(max(energies))
+        warned = f"monitor warnings: {summary.warnings[0]['message']}" if summary.warnings else ""
+        if warned:
+            self.extra.append(warned)
         if judge is None:
-            return self._finish(STABLE, "finished; all values finite")
+            return self._finish(STABLE if not warned else RECOVERED, "finished; the health monitor trusts it")
         outcome, message = judge(sim, summary)
+        if outcome == STABLE and warned:       # "stable" is only what the monitor found clean throughout
+            outcome = RECOVERED
         return self._finish(outcome, message)
+
+    def _health(self, summary):
+        """min det F as the health monitor saw it (every step, every law), not recomputed here."""
+        low = (summary.health or {}).get("min_det_F")
+        if low is not None:
+            self.min_det = min(self.min_det, low)
 
     def _refuse_inverted(self, sim, u):
         from ... import laws
@@ -188,7 +197,7 @@ class _Run:
 
 
 def _any_detected(outcome) -> bool:
-    return outcome in (STABLE, RECOVERED, DIVERGED) or outcome.startswith("refused (")
+    return outcome in (STABLE, RECOVERED, DIVERGED, INVALID) or outcome.startswith("refused (")
 
 
 def _is(*names):
@@ -211,9 +220,15 @@ def case_stiffness(quick):
     for E in Es:
         for dt in dts:
             bound = GRAVITY * (dt * steps) ** 2 + 10.0 * max(BAR)
-            run = _Run(f"stiffness E={E:.0e}", "stvk", "implicit_euler", dt,
-                       f"stable: all finite, max|u| <= {bound:.3g} (free fall over the run + 10 x size)",
-                       _is(STABLE))
+            # rho g L / E > 0.5: the bar cannot carry its own weight; StVK collapses (inverts) under it
+            soft = 1000.0 * GRAVITY * BAR[0] / E > 0.5
+            if soft:
+                expected, allowed = ("too soft to carry its weight: invalid or diverged (detected), or stable "
+                                     "without any inverted element", _is(STABLE, INVALID, DIVERGED))
+            else:
+                expected, allowed = (f"stable: all finite, max|u| <= {bound:.3g} (free fall over the run + "
+                                     "10 x size)", _is(STABLE))
+            run = _Run(f"stiffness E={E:.0e}", "stvk", "implicit_euler", dt, expected, allowed)
 
             def judge(sim, summary, bound=bound, run=run):
                 ok = run.max_u <= bound
@@ -472,7 +487,8 @@ def _report_text(rows, quick, total) -> str:
     lines = ["# Stability report", "",
              f"{'Quick' if quick else 'Full'} suite: {len(rows)} cases, {n_ok} met their expectation, "
              f"{len(rows) - n_ok} did not; {total:.1f} s in all.", "",
-             "Outcomes: `stable`, `recovered`, `diverged (detected)`, `refused (reason)`.", "",
+             "Outcomes (by the runtime's health monitor): `stable`, `recovered`, `invalid (detected)`, "
+             "`diverged (detected)`, `refused (reason)`.", "",
              "| case | law | integrator | dt | outcome | ok | max energy | max abs u | min det F | newton | linear | wall s |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
