@@ -94,6 +94,9 @@ def measure(element, cells, size, law, kind, linear, steps) -> dict:
         "setup_s": t["setup"], "wall_s": elapsed,
         "assembly_per_unit_s": t["assembly"] / per, "solve_per_unit_s": t["linear_solve"] / per,
         "per_unit_s": (t["total"] - t["setup"]) / per,
+        # the health monitor's own checks (finite state, balance, displacement, min det F per step)
+        "health_per_step_s": t.get("health", 0.0) / steps,
+        "health_fraction": t.get("health", 0.0) / max(t["total"] - t["setup"], 1e-12),
         "unit": "step" if kind != "static" else "newton iteration",
         # dynamic runs: the first step also orders the unknowns and factors afresh
         "first_step_s": wall[0] if wall else None,
@@ -265,7 +268,8 @@ def run_steps_bench(quick=False, json_path=None, progress=print, bodies=None, ne
                         progress(f"{body:15s} {law:11s} {kind:15s} {linear:6s} {r['elements']:6d} el {r['free_dofs']:6d} dofs: "
                                  f"{1e3 * r['per_unit_s']:8.1f} ms per {r['unit']} (assembly {1e3 * r['assembly_per_unit_s']:.1f} ms, "
                                  f"solve {1e3 * r['solve_per_unit_s']:.1f} ms with {r['solver_used']}; "
-                                 f"{r['linear_iterations']} linear iterations)"
+                                 f"{r['linear_iterations']} linear iterations; health monitor "
+                                 f"{1e3 * r['health_per_step_s']:.2f} ms per step = {100 * r['health_fraction']:.2f} %)"
                                  + (f"; first step {1e3 * r['first_step_s']:.1f} ms, later steps {1e3 * r['later_steps_s']:.1f} ms"
                                     if r["later_steps_s"] is not None else ""))
     report = {"machine": machine_info(), "quick": quick, "results": results}

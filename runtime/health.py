@@ -37,9 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .errors import InvertedElementError
+from .errors import InvertedElementError, TensormassError
 
-__all__ = ["HealthMonitor", "Check", "min_det_F", "safe_norm"]
+__all__ = ["HealthMonitor", "Check", "min_det_F", "safe_norm", "MAX_ENERGY_SCALE"]
+
+# Loads or prescribed displacements whose energy scale exceeds this (J) are refused before the
+# first step: Newton forms products like f.u ~ |f|^2 / k that overflow doubles long before
+# 1e308, and nothing physical comes near (a 1e6 N load over 1 km is 1e9 J).
+MAX_ENERGY_SCALE = 1e100
 
 # How many warnings are kept in full (the rest are counted): a run never grows without bound.
 MAX_WARNINGS = 50
@@ -160,16 +165,27 @@ class HealthMonitor:
         self.last_min_det = np.inf
         self.H0 = None
         self.energy_scale = self._energy_scale(ctx, duration) if self.enabled else None
+        if self.enabled:                   # compile / load the det F loops now: setup, not the first step
+            min_det_F(model, np.zeros(model.n_dofs))
 
     # -- reference energy -------------------------------------------------------------------------
     def _energy_scale(self, ctx, duration) -> float:
         model = self.model
-        load = float(np.sum(np.linalg.norm(model.f_ext.reshape(-1, model.dim), axis=1))) * model.size
-        scales = [load if np.isfinite(load) else 0.0, self._boundary_energy(ctx)]
-        if self.dynamic and duration:
-            v_b = model.prescribed / duration
-            scales.append(0.5 * float(np.sum(model.mass[model.fixed_dofs] * v_b ** 2)))
-        return max(scales)
+        with np.errstate(over="ignore", invalid="ignore"):
+            load = float(np.sum(np.linalg.norm(model.f_ext.reshape(-1, model.dim), axis=1))) * model.size
+            boundary = self._boundary_energy(ctx)
+            motion = 0.0
+            if self.dynamic and duration:
+                v_b = model.prescribed / duration
+                motion = 0.5 * float(np.sum(model.mass[model.fixed_dofs] * v_b ** 2))
+        for what, value in (("the loads (total load x body size)", load),
+                            ("the prescribed displacements (their elastic energy)", boundary),
+                            ("the prescribed boundary motion (its kinetic energy)", motion)):
+            if not value <= MAX_ENERGY_SCALE:
+                raise TensormassError(f"the energy scale of {what} is {value:.3g} J, beyond what double precision "
+                                      f"can simulate (limit {MAX_ENERGY_SCALE:.0e} J): check the units and "
+                                      "magnitudes of [loads] and [[fixed]] displacement")
+        return max(load, boundary, motion)
 
     def _boundary_energy(self, ctx) -> float:
         """Elastic energy of the prescribed displacements on the fixed nodes alone (every other node at rest)."""
@@ -179,23 +195,33 @@ class HealthMonitor:
         u = np.zeros(model.n_dofs)
         u[model.fixed_dofs] = model.prescribed
         saved = ctx.asm.time
-        values = []
+        values, inverted = [], 0
         for scale in (1.0, 1e-3):          # the small one: the linearised energy, defined for every law
             try:
-                W = ctx.asm.energy(scale * u) / scale ** 2
-            except (InvertedElementError, FloatingPointError):
+                with np.errstate(over="ignore", invalid="ignore"):
+                    W = ctx.asm.energy(scale * u) / scale ** 2
+            except InvertedElementError:
+                inverted += 1              # a law undefined there even at 1e-3: no estimate from it
                 continue
             if np.isfinite(W):
                 values.append(W)
         ctx.asm.time = saved
-        return max(values, default=0.0)
+        if not values:                     # overflow (inf), or inverted both times (no estimate)
+            return 0.0 if inverted == 2 else np.inf
+        return max(values)
 
     # -- per step ---------------------------------------------------------------------------------
-    def start(self, ctx, energies: dict) -> None:
-        """The initial state: the energy balance is measured from here."""
+    def start(self, ctx, energies: dict) -> Check:
+        """The initial state: the energy balance is measured from here; an inverted u0 is a warning."""
         self.H0 = self._balance(energies)
-        if self.enabled and self.H0 is not None and np.isfinite(self.H0):
+        if not self.enabled:               # the user's choice, said in the summary: nothing vouches for the result
+            self.warn(0, ctx.t, "unchecked", "health monitor off (solver.health_monitor = false): "
+                                             "the result was not checked")
+        if not self.enabled:
+            return Check()
+        if self.H0 is not None and np.isfinite(self.H0):
             self.energy_scale = max(self.energy_scale, abs(self.H0))
+        return self._check_inversion(ctx, 0) if self.on_inversion == "warn" else Check()
 
     @staticmethod
     def _balance(energies: dict):

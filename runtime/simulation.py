@@ -212,8 +212,7 @@ class Simulation:
     def _loop(self) -> None:
         integ, model = self.integrator, self.model
         energies = self._energies(0)
-        self.monitor.start(self.ctx, energies)
-        self._write(0, None)
+        self._write(0, self.monitor.start(self.ctx, energies).flag)
         for k in range(1, integ.n_steps + 1):
             t0 = time.perf_counter()
             info = integ.step(k)
