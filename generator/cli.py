@@ -8,16 +8,22 @@
     tensormass bench kernels|compile|steps        kernel throughput against a classic loop; compile budget; steps
     tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
 
-Bad input exits with code 2 and a message naming the problem.
+Every ending is an exit code and at most one line on stderr (README, "Exit codes"):
+0 done; 1 internal error (a bug: `tensormass: internal error: ...`, the traceback
+with TENSORMASS_DEBUG=1); 2 bad input or environment (`tensormass: error: ...`
+naming the problem: scene, mesh, paths, cache, disk full); 3 a run that stopped
+or ended outside the trusted region; 130 interrupted (Ctrl-C), without a traceback.
 """
 from __future__ import annotations
 
 import argparse
 import filecmp
 import json
+import os
 import sys
 import tempfile
 import time
+import traceback
 from pathlib import Path
 
 from .. import laws
@@ -25,7 +31,7 @@ from .backends import BACKENDS
 from .catalogue import entries
 from .elements import ELEMENTS
 
-EXIT_BAD_INPUT = 2
+EXIT_BAD_INPUT = 2          # runtime.errors holds all the exit codes; kept here for importers
 
 
 def committed_dir() -> Path:
@@ -65,11 +71,23 @@ def cmd_generate(args) -> int:
         raise ValueError(f"unknown backend {', '.join(unknown)}; known: {', '.join(BACKENDS)}")
     if args.check:
         return check(selected, backends)
-    out = Path(args.out)
+    out = _output_folder(args.out)
     generate_all(selected, backends, out, constants=args.constants)
     if "numba" in backends and not args.no_compile and args.constants == "precompute":
         report_numba_compile_times(selected, out)
     return 0
+
+
+def _output_folder(path) -> Path:
+    """The --out folder of `generate`, checked before anything is generated: a folder (or a
+    name still free) where this process may write."""
+    from ..runtime.errors import TensormassError
+    from ..runtime.output import check_writable
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise TensormassError(f"--out {out}: exists and is not a folder; give a folder for the generated kernels")
+    check_writable(out, "--out")
+    return out
 
 
 def check(selected, backends) -> int:
@@ -163,13 +181,39 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from ..runtime.errors import TensormassError
-    args = build_parser().parse_args(argv)
+    """Run one command and turn every way it can end into an exit code and one line on stderr."""
+    from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
+                                  TensormassError)
     try:
+        args = build_parser().parse_args(argv)
         return args.run(args)
-    except (TensormassError, ValueError, FileNotFoundError) as error:
-        print(f"tensormass: error: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        return _say("interrupted", EXIT_INTERRUPTED)
+    except RunStopped as stop:                # a command that let a stopped run through (runs print their own)
+        return _say(f"run {stop.status}: {stop}", stop.exit_code)
+    except (TensormassError, ValueError) as error:
+        return _say(f"error: {error}", EXIT_BAD_INPUT)
+    except OSError as error:                  # disk full, permissions, read-only file systems
+        return _say(f"error: {_os_error(error)}", EXIT_BAD_INPUT)
+    except MemoryError:
+        return _say("error: out of memory (try a smaller mesh or fewer steps, or free memory)", EXIT_BAD_INPUT)
+    except Exception as error:                # a bug: one line, the traceback only on request
+        if os.environ.get("TENSORMASS_DEBUG", "") not in ("", "0"):
+            traceback.print_exc()
+        return _say(f"internal error: {type(error).__name__}: {error} (set TENSORMASS_DEBUG=1 for the traceback)",
+                    EXIT_INTERNAL)
+
+
+def _say(text: str, code: int) -> int:
+    print(f"tensormass: {text}", file=sys.stderr)
+    return code
+
+
+def _os_error(error: OSError) -> str:
+    """'PATH: No space left on device' (the file first, as a user looks for it)."""
+    what = error.strerror or str(error)
+    names = [str(n) for n in (error.filename, error.filename2) if n is not None]
+    return f"{' -> '.join(names)}: {what}" if names else what
 
 
 if __name__ == "__main__":

@@ -1,13 +1,17 @@
 """`tensormass run` and `tensormass demo`: simulate a scene file, write VTU frames and a summary.
 
-    tensormass run beam.toml [--out DIR] [--json SUMMARY.json] [--quiet]
-    tensormass demo [--out DIR] [--json SUMMARY.json]
+    tensormass run beam.toml [--out DIR] [--json SUMMARY.json] [--overwrite] [--quiet]
+    tensormass demo [--out DIR] [--json SUMMARY.json] [--overwrite]
 
 add_commands(subparsers) adds both to an argparse parser; each sets
-``run=callable(args) -> int``. Bad input raises TensormassError (exit code 2 in
-generator.cli.main); nothing is written before the scene, its mesh and the
-output paths have been checked, and a run that fails before its first frame
-leaves no output folder behind.
+``run=callable(args) -> int`` returning the exit code: 0 for a result we stand
+behind (warnings, if any, printed and in the summary), 3 when the run stopped
+or ended outside the trusted region (RunStopped), 130 when interrupted. Bad
+input raises TensormassError (exit code 2 in generator.cli.main); nothing is
+written before the scene, its mesh, the --json path and the output folder have
+been checked (output.check_summary_path, output.Writer.prepare), and a run that
+fails before its first frame leaves no output folder behind. A run that stops
+still writes its summary JSON, with "status" and "message" saying why.
 """
 from __future__ import annotations
 
@@ -16,8 +20,8 @@ import time
 from importlib import resources
 from pathlib import Path
 
-from .errors import TensormassError
-from .output import Writer, write_json_atomic
+from .errors import EXIT_OK, RunInterrupted, RunStopped, TensormassError
+from .output import SUMMARY_FORMAT, Writer, check_summary_path, write_summary
 from .scene import Scene
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
@@ -84,56 +88,105 @@ def _simulation_class():
 _RUN_FAILURES = (TensormassError, ValueError, ArithmeticError, RuntimeError)
 
 
-def _check_json_path(path) -> Path | None:
-    if path is None:
-        return None
-    path = Path(path)
-    if path.is_dir():
-        raise TensormassError(f"--json {path}: is a folder; give a file name")
-    if not path.parent.is_dir():
-        raise TensormassError(f"--json {path}: folder {path.parent} does not exist")
-    return path
-
-
-def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, stream=None) -> dict:
-    """Run a validated scene; returns the summary dict (Summary.to_dict() plus scene and output).
+def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, stream=None,
+              overwrite: bool = False) -> dict:
+    """Run a validated scene; returns the summary dict (Summary.to_dict() plus format, status,
+    message, exit_code, scene and output), also written to json_path when given.
 
     out overrides scene.output.dir; frames go there every scene.output.every steps.
+    Everything that can be checked is checked before the first step (the --json path,
+    the output folder: see output.Writer.prepare). A run that stops (RunStopped: diverged,
+    failed, invalid, interrupted) still writes its summary; data["exit_code"] says how it
+    ended (0, 3 or 130). Bad input and unwritable outputs raise TensormassError (exit 2).
     """
     stream = stream if stream is not None else sys.stdout
-    json_path = _check_json_path(json_path)
     if out is not None:
         scene.output.dir = str(out)
     out_dir = Path(scene.output.dir) if scene.output.dir else None
     mesh = scene.load_mesh()
-    writer = Writer(out_dir, mesh) if out_dir is not None else None
+    writer = Writer(out_dir, mesh, overwrite=overwrite) if out_dir is not None else None
+    json_path = check_summary_path(json_path, scene_file=scene.source, writer=writer)
+    if writer is not None:
+        writer.prepare()
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
+    summary, stopped = _simulate(Simulation, scene, writer, progress)
+    data = _summary_data(summary, stopped, scene, mesh, writer, out_dir)
+    if json_path is not None:
+        write_summary(json_path, data)
+        data["output_json"] = str(json_path)
+    if not quiet:
+        print_summary(data, stream=stream, json_path=json_path)
+    if stopped is not None:
+        print(f"tensormass: run {data['status']}: {data['message']}", file=sys.stderr)
+    return data
+
+
+def _simulate(Simulation, scene, writer, progress):
+    """(summary, None) for a run we stand behind, (partial summary or None, RunStopped) otherwise.
+
+    Other failures propagate (exit 2), after the writer dropped a folder it created for nothing."""
+    sim = None
     try:
         sim = Simulation(scene, progress=progress, writer=writer)
-        summary = sim.run()
-        if writer is not None:
-            writer.close()
+        return sim.run(), None
+    except RunStopped as exc:
+        _output_failure(writer)
+        stopped = exc
+    except KeyboardInterrupt:
+        # Simulation turns Ctrl-C during the steps into RunInterrupted; this one came before
+        # them (setup) or from a runtime that does not yet: the summary says so all the same.
+        stopped = RunInterrupted(f"interrupted (Ctrl-C) after step {_steps_done(sim)}",
+                                 getattr(sim, "summary", None))
     except BaseException as exc:
-        if progress is not None:
-            progress.finish()
+        _output_failure(writer)
         if writer is not None:
             writer.discard()
         if isinstance(exc, _RUN_FAILURES) and not isinstance(exc, TensormassError):
             raise TensormassError(f"simulation failed: {type(exc).__name__}: {exc}") from exc
         raise
-    data = dict(summary.to_dict())
+    finally:
+        if progress is not None:
+            progress.finish()
+    if writer is not None:
+        writer.close()
+        if writer.stopped is None:                # the runtime did not note it: do it here
+            writer.mark_stopped(_steps_done(sim), f"run {stopped.status}: {stopped}")
+        writer.discard()
+    return stopped.summary, stopped
+
+
+def _output_failure(writer) -> None:
+    """A frame that could not be written (disk full...) ends the run as bad environment (exit 2),
+    whatever status the runtime gave the stop: raise the writer's error naming the file."""
+    if writer is not None and writer.error is not None:
+        raise writer.error
+
+
+def _steps_done(sim) -> int:
+    """Steps the run finished (the runtime's count; 0 before the first)."""
+    done = getattr(getattr(sim, "summary", None), "steps_done", None)
+    return int(done if done is not None else getattr(sim, "_step", 0) or 0)
+
+
+def _summary_data(summary, stopped, scene, mesh, writer, out_dir) -> dict:
+    """The summary dict: the runtime's Summary (when there is one), how the run ended, scene, output."""
+    data = {"format": SUMMARY_FORMAT}
+    if summary is not None:
+        data.update(summary.to_dict())
+    if stopped is not None:
+        data.update(status=stopped.status, message=str(stopped), exit_code=stopped.exit_code)
+    else:
+        data.setdefault("status", "ok")
+        data.setdefault("message", None)
+        data["exit_code"] = EXIT_OK
+    data.setdefault("warnings", [])
     data["scene"] = {"name": scene.name, "source": scene.source, "solver": scene.solver.kind,
                      "nodes": mesh.n_points,
                      "cells": {b: sum(len(x) for x in mesh.blocks if x.type == b) for b in mesh.cell_types()}}
     data["output"] = None if writer is None else {
         "dir": str(out_dir), "pvd": str(writer.pvd_path) if writer.frames else None,
         "frames": len(writer.frames), "every": scene.output.every}
-    if json_path is not None:
-        write_json_atomic(json_path, data)
-        data["output_json"] = str(json_path)
-    if not quiet:
-        print_summary(data, stream=stream, json_path=json_path)
     return data
 
 
@@ -181,6 +234,39 @@ def _adapt_rows(adapt) -> list:
     return rows
 
 
+def _status_rows(data: dict) -> list:
+    """How the run ended, always shown: a result we stand behind, with warnings, or why not."""
+    status = data.get("status") or "ok"
+    n_warn = len(data.get("warnings") or [])
+    if status in ("ok", "warnings"):
+        text = "ok" if not n_warn else f"ok, with {n_warn} warning(s) (below): check the flagged frames"
+    else:
+        done = data.get("steps_done")
+        where = f" after {done} of {data.get('steps', '?')} step(s)" if done is not None else ""
+        text = f"{status}{where}: {data.get('message') or 'no message'} (not a result to trust)"
+    return [("status", text)]
+
+
+# At most this many warnings are listed on the terminal (all of them are in the summary JSON).
+_WARNINGS_SHOWN = 5
+
+
+def _warning_rows(warnings, json_path) -> list:
+    """One row per health warning: the step, the time, the kind and the message."""
+    rows = []
+    for w in (warnings or [])[:_WARNINGS_SHOWN]:
+        if isinstance(w, dict):
+            t = w.get("time")
+            when = f"step {w.get('step', '?')}" + (f" (t = {t:.4g} s)" if isinstance(t, (int, float)) else "")
+            rows.append(("warning", f"{when}, {w.get('kind', '?')}: {w.get('message', '')}"))
+        else:
+            rows.append(("warning", str(w)))
+    extra = len(warnings or []) - _WARNINGS_SHOWN
+    if extra > 0:
+        rows.append(("warning", f"... and {extra} more" + (f" in {json_path}" if json_path else " (see --json)")))
+    return rows
+
+
 def print_summary(data: dict, stream=None, json_path=None) -> None:
     """The end-of-run report (the keys of Summary.to_dict(), tolerant of missing ones)."""
     import math
@@ -191,6 +277,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     cells = ", ".join(f"{n} {k}" for k, n in (sc.get("cells") or {}).items())
     rows = [("scene", f"{sc.get('name', '?')} ({sc.get('solver', '?')}, {steps} step(s), "
                       f"{sc.get('nodes', '?')} nodes, {cells or '?'} cells)")]
+    rows += _status_rows(data)
     rows.append(("kernels", _fmt_kernels(data.get("kernels", "?"))))
     setup, first, total = t.get("setup"), t.get("first_step"), t.get("total")
     rows.append(("before 1st step", f"{_fmt_seconds(setup)} (mesh, kernel loading/compilation, constants)"))
@@ -216,6 +303,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((f"probe {name}", f"u = {_fmt_vec(u)} m, |u| = {norm:.4g} m"))
         except (TypeError, ValueError):
             rows.append((f"probe {name}", str(u)))
+    rows += _warning_rows(data.get("warnings"), json_path)
     rows += _adapt_rows(data.get("adapt"))
     o = data.get("output")
     if o:
@@ -234,9 +322,10 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
 
 
 def cmd_run(args) -> int:
-    scene = Scene.from_toml(args.scene)
-    run_scene(scene, out=args.out, json_path=args.json, quiet=args.quiet)
-    return 0
+    scene = Scene.from_toml(args.scene, max_memory=getattr(args, "max_memory", None))
+    data = run_scene(scene, out=args.out, json_path=args.json, quiet=args.quiet,
+                     overwrite=getattr(args, "overwrite", False))
+    return data["exit_code"]
 
 
 def demo_text() -> str:
@@ -259,7 +348,8 @@ def euler_bernoulli_tip(scene: Scene) -> tuple:
 
 
 def cmd_demo(args) -> int:
-    scene = Scene.from_string(demo_text(), name="demo", source="tensormass demo (runtime/demo.toml)")
+    scene = Scene.from_string(demo_text(), name="demo", source="tensormass demo (runtime/demo.toml)",
+                              max_memory=getattr(args, "max_memory", None))
     out = Path(args.out or DEMO_OUT)
     size = " x ".join(f"{s:g}" for s in scene.mesh.size)
     mesh = scene.load_mesh()
@@ -269,9 +359,10 @@ def cmd_demo(args) -> int:
     print(f"tensormass demo: a {size} m mixed bar ({types}; {mesh.n_points} nodes), rho = {m0.density:g} kg/m^3, "
           f"E = {m0.E:g} Pa, nu = {m0.nu:g}, clamped at x = 0, under gravity; {scene.solver.kind} solve "
           f"({scene.solver.steps} step(s)); laws {laws}")
-    data = run_scene(scene, out=out, json_path=args.json, quiet=getattr(args, "quiet", False))
+    data = run_scene(scene, out=out, json_path=args.json, quiet=getattr(args, "quiet", False),
+                     overwrite=getattr(args, "overwrite", False))
     tip = (data.get("probes") or {}).get("tip")
-    if tip is not None:
+    if tip is not None and data["exit_code"] == 0:      # no comparison for a result we do not trust
         eb, timo = euler_bernoulli_tip(scene)
         w = -float(tip[2])
         print(f"tip deflection: {w:.4g} m; Euler-Bernoulli {eb:.4g} m (ratio {w / eb:.3f}), with Timoshenko's "
@@ -279,7 +370,18 @@ def cmd_demo(args) -> int:
               "stiff in bending; refine mesh.cells or use tetra10 to converge.")
     o = data.get("output") or {}
     print(f"output: {o.get('pvd') or out} -- open it in ParaView (Warp By Vector on 'displacement')")
-    return 0
+    return data["exit_code"]
+
+
+_OVERWRITE_HELP = ("replace files in the output folder named like this run's outputs (frame.pvd, frame_*.vtu) "
+                   "that an earlier tensormass run did not write (refused without it)")
+_JSON_HELP = ("write the run summary as JSON to this file (also when the run stops; an existing file "
+              "is replaced only when it is an earlier summary)")
+
+
+# --max-memory (runtime.resources): the run is refused before allocating when its estimate is above it.
+_MAX_MEMORY_HELP = ("refuse the run when its estimated peak memory is above SIZE (8G, 500M or bytes; "
+                    "default: $TENSORMASS_MAX_MEMORY, else 80%% of the available memory)")
 
 
 def add_commands(subparsers) -> None:
@@ -287,11 +389,15 @@ def add_commands(subparsers) -> None:
     p = subparsers.add_parser("run", help="simulate a scene file (TOML), write VTU frames and a summary")
     p.add_argument("scene", help="scene file (.toml)")
     p.add_argument("--out", help="output folder for the VTU frames and the .pvd (overrides [output] dir)")
-    p.add_argument("--json", metavar="SUMMARY", help="write the run summary as JSON to this file")
+    p.add_argument("--json", metavar="SUMMARY", help=_JSON_HELP)
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
+    p.add_argument("--max-memory", metavar="SIZE", help=_MAX_MEMORY_HELP)
     p.set_defaults(run=cmd_run)
 
     p = subparsers.add_parser("demo", help="run the built-in demo (a mixed bar bending under its own weight)")
     p.add_argument("--out", help=f"output folder (default: ./{DEMO_OUT})")
-    p.add_argument("--json", metavar="SUMMARY", help="write the run summary as JSON to this file")
+    p.add_argument("--json", metavar="SUMMARY", help=_JSON_HELP)
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
+    p.add_argument("--max-memory", metavar="SIZE", help=_MAX_MEMORY_HELP)
     p.set_defaults(run=cmd_demo)

@@ -101,10 +101,11 @@ def source_path(entry) -> Path:
     committed = Path(generated.__file__).resolve().parent / "c" / f"{entry.name}.c"
     if committed.exists():
         return committed
-    from .kernels import cache_dir
+    from .kernels import cache_dir, writable_cache_dir
     cached = cache_dir() / "c" / f"{entry.name}.c"
     if not (cached.exists() and _fresh(cached)):
         from ..generator.pipeline import generate_all
+        writable_cache_dir(cached.parent, f"generating C kernel {entry.name}")
         generate_all([entry], ["c"], cache_dir(), progress=None)
     if not cached.exists():
         raise KernelNotFoundError(f"could not generate C kernel {entry.name}")
@@ -229,7 +230,8 @@ def _kill_group(proc) -> None:
 
 def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str]) -> dict:
     """Compile source into lib (atomically, with its sidecar hash); returns the compile record."""
-    lib.parent.mkdir(parents=True, exist_ok=True)
+    from .kernels import writable_cache_dir
+    writable_cache_dir(lib.parent, f"compiling C kernel {name}")
     fd, tmp = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}.", suffix=".so.tmp")
     os.close(fd)
     try:

@@ -32,6 +32,45 @@ def cache_dir() -> Path:
     return Path(root) / GENERATOR_VERSION
 
 
+def _cache_origin() -> str:
+    """Which setting chose the cache folder (what the user has to change)."""
+    if os.environ.get("TENSORMASS_CACHE"):
+        return f"$TENSORMASS_CACHE={os.environ['TENSORMASS_CACHE']}"
+    if os.environ.get("XDG_CACHE_HOME"):
+        return f"$XDG_CACHE_HOME={os.environ['XDG_CACHE_HOME']}"
+    return "the default ~/.cache/tensormass"
+
+
+def writable_cache_dir(folder, needed_for: str) -> Path:
+    """folder (inside cache_dir()), created if missing and checked writable, right before a write.
+
+    Only called where something must be written (a kernel generated or compiled now): a
+    run whose kernels are committed or already compiled works with a read-only cache.
+    Raises TensormassError naming the folder, the setting behind it and what needed it."""
+    import tempfile
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".tensormass-probe-", suffix=".tmp")
+        os.close(fd)
+        os.remove(probe)
+    except OSError as exc:
+        raise TensormassError(f"kernel cache {folder} cannot be written ({_blocker(folder, exc)}; set by "
+                              f"{_cache_origin()}): {needed_for} needs it; set TENSORMASS_CACHE to a "
+                              "writable folder") from None
+    return folder
+
+
+def _blocker(folder: Path, exc: OSError) -> str:
+    """Why a folder cannot be written: an existing parent that is a file, or the OS's reason."""
+    path = folder
+    while not os.path.lexists(path) and path.parent != path:
+        path = path.parent
+    if os.path.lexists(path) and not path.is_dir():
+        return f"{path} is not a folder"
+    return exc.strerror or str(exc)
+
+
 class Kernel:
     """One element x law x quadrature kernel: constants once, then energy, forces, stiffness."""
 
@@ -177,6 +216,7 @@ def _numba_module(name: str, entry):
     path = cache_dir() / "numba" / f"{name}.py"
     if not path.exists():
         from ..generator.pipeline import generate_all
+        writable_cache_dir(path.parent, f"generating kernel {name} (not in the committed catalogue)")
         generate_all([entry], ["numba"], cache_dir(), progress=None)
     if not path.exists():
         raise KernelNotFoundError(f"could not generate kernel {name}")
@@ -205,6 +245,7 @@ def load_recompute_kernel(element: str, law: str, quadrature: str, backend: str 
     path = cache_dir() / "recompute" / backend / (ir.name + (".py" if backend == "numba" else ".c"))
     text = generate(ir, backend)
     if not path.exists() or path.read_text(encoding="utf-8") != text:
+        writable_cache_dir(path.parent, f"the recompute variant of {ir.name}")
         write_atomic(path, text)
     if backend == "numba":
         return Kernel(_import_path(path, f"tensormass_recompute_{ir.name}"), "numba")

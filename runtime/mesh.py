@@ -212,7 +212,22 @@ def read_mesh(path) -> Mesh:
         cells = np.concatenate(parts)
         tags = None if tag is None else np.full(len(cells), tag, dtype=np.int64)
         blocks.append(CellBlock(ctype, cells, tags))
+    _check_node_ids(blocks, len(points), path)
     return Mesh(points, blocks)
+
+
+def _check_node_ids(blocks, n_points: int, path) -> None:
+    """Every node id a cell lists must be one of the file's points (0 .. n_points - 1): some
+    formats (VTU, VTK) are read without this check and would fail later in indexing."""
+    for b, block in enumerate(blocks):
+        bad = np.flatnonzero(((block.cells < 0) | (block.cells >= n_points)).any(axis=1))
+        if bad.size:
+            row = block.cells[bad[0]]
+            ids = ", ".join(str(int(i)) for i in row[(row < 0) | (row >= n_points)][:4])
+            tag = "" if block.tags is None else f", tag {int(block.tags[0])}"
+            raise MeshError(f"{path}: block {b} ({block.type}{tag}): cell {int(bad[0])} of the block refers "
+                            f"to node(s) {ids}, but the file has {n_points} nodes (ids 0..{n_points - 1}); "
+                            f"{bad.size} such cell(s) in the block")
 
 
 def _points_for_dim(points, dim, path):

@@ -1,30 +1,87 @@
 """Write a simulation as a VTU time series with a ParaView .pvd collection.
 
     writer = Writer("out", mesh)                     # nothing is created yet
+    writer.prepare()                                 # before the run: checks only (see below)
     writer.write_frame(step, time, points, u, {"energy": e_per_cell})
+    writer.write_frame(step, time, points, u, flag="inverted elements (3)")   # a frame after a warning
+    writer.mark_stopped(step, "run diverged: energy grew 1e9-fold")
     writer.close()
 
-Every frame is a complete .vtu file written to a temporary name and renamed,
-and the .pvd that lists the finished frames is rewritten the same way after
-each frame: a run that crashes leaves a collection ParaView can open. The
-output folder is created with the first frame; if the run ends before any
-frame (bad input, a failing first step), discard() removes it again when this
+Files. Every frame is a complete <name>_<step>.vtu written to a temporary
+name and renamed. The collection <name>.pvd starts with the comment
+``<!-- tensormass frames -->`` (how a later run knows the folder's frames are
+ours) and ends with its closing tags; each frame appends its DataSet line by
+one os.pwrite of "new line + closing tags" at the offset where the closing
+tags were. That costs the same for the 10th and the 10 000th frame, never
+rewrites earlier lines, and the file is valid XML after every frame: a
+write that fails half-way (disk full) is undone by putting the closing tags
+back, and a run that crashes leaves a collection ParaView can open.
+
+Health marks. ``write_frame(..., flag=text)`` marks a frame written after a
+health warning: the .pvd gets the comment ``<!-- health warning (step k): text -->``
+just before the frame's DataSet line, and the .vtu a cell field
+``health_warning`` (1 on every cell; unflagged frames have no such field).
+``mark_stopped(step, message)`` appends ``<!-- run stopped at step k: message -->``
+after the last frame (never raises: it only annotates). Comment texts are made
+valid XML comments (one line, no "--", no characters XML forbids).
+
+Output folder. ``prepare()`` (run by the first write_frame when not called
+before) checks, without writing or removing anything, that the folder (or the
+closest existing parent) is writable and looks at files with the names this
+writer uses: frames of an earlier run of ours (listed in a .pvd carrying our
+comment) and leftover temporary files are stale and are removed when the
+first frame is written, so a shorter rerun leaves no frames of a longer one;
+a .pvd without our comment or a frame it does not list is someone else's:
+prepare() refuses (TensormassError) unless ``overwrite=True`` (``--overwrite``),
+which replaces them too. Other files in the folder are never touched. The
+folder is created with the first frame; if the run ends before any frame
+(bad input, a failing first step), discard() removes it again when this
 writer created it and it is still empty. Frames with NaN or Inf are refused
-(TensormassError) and nothing of them is written.
+(TensormassError) and nothing of them is written. A file that cannot be
+written (disk full, permissions) raises OutputError naming it; the frames
+written before stay listed in the .pvd.
+
+Summaries. ``write_summary(path, data)`` writes the run summary JSON
+atomically with the key ``"format": "tensormass-summary/1"``;
+``check_summary_path`` refuses (before the run) a path holding anything but
+such a summary: the scene file, frames, the .pvd, symbolic links, devices.
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
+import re
+import stat
+import tempfile
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
+from xml.sax.saxutils import quoteattr, unescape
 
 import numpy as np
 
 from ..generator.pipeline import write_atomic
 from .errors import TensormassError
 
-__all__ = ["Writer", "write_bytes_atomic", "write_json_atomic", "write_text_atomic"]
+__all__ = ["Writer", "OutputError", "write_bytes_atomic", "write_json_atomic", "write_text_atomic",
+           "write_summary", "check_summary_path", "is_summary_file", "check_writable", "xml_comment",
+           "PVD_MARKER", "SUMMARY_FORMAT"]
+
+PVD_MARKER = "<!-- tensormass frames -->"
+SUMMARY_FORMAT = "tensormass-summary/1"
+# A summary of ours has its "format" key first; a file without it in its first bytes is not ours.
+_SUMMARY_PROBE_BYTES = 4096
+_SUMMARY_RE = re.compile(rb'"format"\s*:\s*"' + re.escape(SUMMARY_FORMAT.encode()) + rb'"')
+
+_PVD_HEAD = ('<?xml version="1.0"?>\n' + PVD_MARKER + "\n"
+             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+             "  <Collection>\n").encode()
+_PVD_TAIL = b"  </Collection>\n</VTKFile>\n"
+_DATASET_FILE_RE = re.compile(rb'<DataSet\b[^>]*\bfile="([^"<>]*)"')
+_MAX_COMMENT = 400
+
+
+class OutputError(TensormassError):
+    """An output file could not be written (disk full, permissions); the message names the file."""
 
 
 def write_bytes_atomic(path, data: bytes) -> None:
@@ -72,15 +129,139 @@ def _check_finite(name: str, values: np.ndarray) -> None:
         raise TensormassError(f"refusing to write {name} with NaN or Inf values{where}")
 
 
+def _reason(exc: OSError) -> str:
+    """'No space left on device' and the like (the OS's words; the errno name when it has none)."""
+    return exc.strerror or errno.errorcode.get(exc.errno or 0, "") or str(exc)
+
+
+# ============================================================================== checks before a run
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """path itself or its closest existing parent (what a later mkdir -p would write into)."""
+    path = Path(os.path.abspath(path))
+    while not os.path.lexists(path) and path.parent != path:
+        path = path.parent
+    return path
+
+
+def check_writable(folder, what: str) -> None:
+    """Create and remove a temporary file in folder (or its closest existing parent when it
+    does not exist yet): permissions, read-only mounts and quotas show up now, before a run,
+    instead of after its last step. Raises TensormassError naming what and where."""
+    where = _existing_ancestor(Path(folder))
+    if not where.is_dir():
+        raise TensormassError(f"{what} {folder}: {where} is not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=where, prefix=".tensormass-probe-", suffix=".tmp")
+        os.close(fd)
+        os.remove(probe)
+    except OSError as exc:
+        raise TensormassError(f"{what} {folder}: cannot write in {where} ({_reason(exc)})") from None
+
+
+def is_summary_file(path) -> bool:
+    """A regular file (not a link) whose first bytes carry our summary marker."""
+    try:
+        info = os.lstat(path)
+        if not stat.S_ISREG(info.st_mode):
+            return False
+        with open(path, "rb") as handle:
+            return bool(_SUMMARY_RE.search(handle.read(_SUMMARY_PROBE_BYTES)))
+    except OSError:
+        return False
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_summary_path(path, scene_file=None, writer=None) -> Path | None:
+    """The --json path, checked before the run: None stays None.
+
+    Refused: a folder, a missing folder, the scene file, the .pvd or a frame of the
+    writer's folder (now or later), a symbolic link, a device/fifo/socket, and any
+    existing file that is not a summary of ours; its folder must be writable.
+    """
+    if path is None:
+        return None
+    path = Path(path)
+    if path.is_dir():
+        raise TensormassError(f"--json {path}: is a folder; give a file name")
+    if not path.parent.is_dir():
+        raise TensormassError(f"--json {path}: folder {path.parent} does not exist")
+    if scene_file is not None and _same_file(path, scene_file):
+        raise TensormassError(f"--json {path}: is the scene file; give another file name")
+    if writer is not None and writer.owns_name(path):
+        raise TensormassError(f"--json {path}: is one of the output files ({writer.out_dir}/"
+                              f"{writer.name}.pvd or {writer.name}_*.vtu); give another file name")
+    _check_existing_summary(path)
+    check_writable(path.parent, "--json")
+    return path
+
+
+def _check_existing_summary(path: Path) -> None:
+    """An existing file at path may only be replaced when it is one of our summaries."""
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise TensormassError(f"--json {path}: {_reason(exc)}") from None
+    if stat.S_ISLNK(info.st_mode):
+        raise TensormassError(f"--json {path}: is a symbolic link (to {os.readlink(path)}); "
+                              "refusing to replace it, give the file itself or another name")
+    if not stat.S_ISREG(info.st_mode):
+        raise TensormassError(f"--json {path}: exists and is not a regular file (a device, fifo or socket); "
+                              "refusing to write there")
+    if not is_summary_file(path):
+        raise TensormassError(f"--json {path}: exists and is not a tensormass summary (no "
+                              f'"format": "{SUMMARY_FORMAT}"); refusing to replace it, remove it or give another name')
+
+
+def write_summary(path, data: dict) -> None:
+    """The summary JSON, atomically, with the format marker as its first key."""
+    out = {"format": SUMMARY_FORMAT}
+    out.update((k, v) for k, v in data.items() if k != "format")
+    try:
+        write_json_atomic(path, out)
+    except OSError as exc:
+        raise OutputError(f"cannot write the summary {path}: {_reason(exc)}") from None
+
+
+def xml_comment(text) -> str:
+    """text as one valid XML comment: one line, no '--', only characters XML allows, bounded."""
+    text = " ".join(str(text).split())
+    text = "".join(c if _xml_char(c) else "?" for c in text)
+    while "--" in text:
+        text = text.replace("--", "- ")
+    if len(text) > _MAX_COMMENT:
+        text = text[:_MAX_COMMENT - 3] + "..."
+    return f"<!-- {text} -->"
+
+
+def _xml_char(c: str) -> bool:
+    o = ord(c)
+    return 0x20 <= o <= 0xD7FF or 0xE000 <= o <= 0xFFFD or o >= 0x10000
+
+
+# ============================================================================== the writer
+
+
 class Writer:
     """A VTU series <out_dir>/<name>_<step>.vtu and its collection <out_dir>/<name>.pvd.
 
     deformed=False writes the given points (reference positions by default)
     with the displacement as point data, for ParaView's "Warp By Vector";
     deformed=True writes the reference points moved by the displacement.
+    overwrite=True replaces files with this writer's names that an earlier run
+    of ours did not write (refused otherwise; see the module docstring).
     """
 
-    def __init__(self, out_dir, mesh, name: str = "frame", deformed: bool = False):
+    def __init__(self, out_dir, mesh, name: str = "frame", deformed: bool = False, overwrite: bool = False):
         if not name or "/" in name or "\\" in name or name.startswith("."):
             raise TensormassError(f"bad output name {name!r}")
         self.out_dir = Path(out_dir)
@@ -89,9 +270,19 @@ class Writer:
         self.mesh = mesh
         self.name = name
         self.deformed = deformed
+        self.overwrite = overwrite
         self.frames: list = []          # [(time, file name)] of finished frames
         self.created_dir = False
         self.closed = False
+        self.stopped = None             # (step, message) once mark_stopped() was called
+        self.error = None               # the OutputError that ended the writing, if any
+        self._prepared = False          # prepare() ran
+        self._stale: list = []          # files of an earlier run, removed with the first frame
+        self._lines: list = []          # [(file name or None, bytes)]: the .pvd between head and tail
+        self._pvd_written = False       # the .pvd of this run exists (appends from now on)
+        self._frame_re = re.compile(rf"{re.escape(name)}_\d+\.vtu\Z")
+        # temporary names of an interrupted frame (.<frame>.tmp) or .pvd (.<name>.pvd.<random>.tmp)
+        self._tmp_re = re.compile(rf"\.{re.escape(name)}(_\d+\.vtu|\.pvd\.[A-Za-z0-9_]+)\.tmp\Z")
         self._offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
 
     def set_mesh(self, mesh) -> None:
@@ -107,16 +298,158 @@ class Writer:
     def frame_path(self, step: int) -> Path:
         return self.out_dir / f"{self.name}_{int(step):06d}.vtu"
 
+    def _kind(self, file_name: str):
+        """'pvd', 'frame' or 'tmp' for a name this writer writes in its folder, else None."""
+        if file_name == self.pvd_path.name:
+            return "pvd"
+        if self._frame_re.match(file_name):
+            return "frame"
+        return "tmp" if self._tmp_re.match(file_name) else None
+
+    def owns_name(self, path) -> bool:
+        """Whether path is, or may become, one of this writer's files (its .pvd, a frame, a temporary)."""
+        path = Path(path)
+        same = os.path.realpath(path.parent) == os.path.realpath(self.out_dir)
+        return same and self._kind(path.name) is not None
+
+    # -- before the run ------------------------------------------------------------------------
+    def prepare(self) -> None:
+        """Check the output folder before a run; writes and removes nothing (see the module docstring).
+
+        Raises TensormassError when the folder cannot be written, or holds files with this
+        writer's names that an earlier run of ours did not write (unless overwrite).
+        """
+        self._prepared = True
+        check_writable(self.out_dir, "output folder")
+        if not self.out_dir.is_dir():
+            return
+        listed = self._listed_by_our_pvd()
+        stale, foreign = [], []
+        for entry in sorted(os.scandir(self.out_dir), key=lambda e: e.name):
+            kind = self._kind(entry.name)
+            if kind is None:
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                raise TensormassError(f"output folder {self.out_dir}: {entry.name} is a folder; "
+                                      "remove it or choose another output folder")
+            regular = entry.is_file(follow_symlinks=False)
+            ours = regular and (kind == "tmp" or (listed is not None and (kind == "pvd" or entry.name in listed)))
+            (stale if ours else foreign).append(Path(entry.path))
+        if foreign and not self.overwrite:
+            names = ", ".join(p.name for p in foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+            raise TensormassError(
+                f"output folder {self.out_dir} holds {len(foreign)} file(s) with the names this run writes "
+                f"that no earlier tensormass run there wrote ({names}); refusing to replace them: "
+                "use --overwrite to replace them, or choose another output folder")
+        # the old .pvd goes first: at no moment does a .pvd list a frame that was removed
+        self._stale = sorted(stale + foreign, key=lambda p: p.name != self.pvd_path.name)
+
+    def _listed_by_our_pvd(self):
+        """The frame names listed in an existing .pvd of ours (a set), None when there is none."""
+        try:
+            if not stat.S_ISREG(os.lstat(self.pvd_path).st_mode):
+                return None
+            with open(self.pvd_path, "rb") as handle:
+                head = handle.read(_SUMMARY_PROBE_BYTES)
+                if PVD_MARKER.encode() not in head:
+                    return None
+                text = head + handle.read()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            raise TensormassError(f"cannot read {self.pvd_path}: {_reason(exc)}") from None
+        names = {unescape(m.decode("utf-8", "replace")) for m in _DATASET_FILE_RE.findall(text)}
+        return {n for n in names if self._frame_re.match(n)}   # never a path out of the folder
+
+    def _start(self) -> None:
+        """With the first frame: create the folder and remove the stale files found by prepare()."""
+        if not self._prepared:
+            self.prepare()
+        self._make_dir()
+        for path in self._stale:
+            try:
+                _remove(path)
+            except OSError as exc:
+                raise self._fail(f"cannot remove {path} of an earlier run: {_reason(exc)}") from None
+        self._stale = []
+
     # -- writing ---------------------------------------------------------------------------------
-    def write_frame(self, step, time, points, displacement, fields=None, cell_fields=None) -> Path:
-        """Write one frame and update the .pvd; returns the frame's path.
+    def write_frame(self, step, time, points, displacement, fields=None, cell_fields=None, flag=None) -> Path:
+        """Write one frame and append it to the .pvd; returns the frame's path.
 
         points: the coordinates to write, (n_points, dim) (None: the mesh's
         reference points); displacement: (n_points, dim). fields: name ->
         array with one row per point (point data) or, when the length differs,
         one row per cell in block order (cell data); cell_fields: always cell
         data. 2-component vectors of 2D meshes are padded with z = 0.
+        flag: None, or the health warning this frame is written under (a .pvd
+        comment and the cell field health_warning = 1).
         """
+        m, time = self._frame_mesh(step, time, points, displacement, fields, cell_fields)
+        if flag is not None:
+            m.cell_data["health_warning"] = [np.ones(len(b), dtype=np.uint8) for b in self.mesh.blocks]
+        if not self.frames and not self._pvd_written:
+            self._start()
+        target = self.frame_path(step)
+        self._write_vtu(m, target)
+        lines = [] if flag is None else [(None, xml_comment(f"health warning (step {int(step)}): {flag}"))]
+        lines.append((target.name, f'<DataSet timestep="{time!r}" group="" part="0" file={quoteattr(target.name)}/>'))
+        relisted = any(name == target.name for _, name in self.frames)
+        try:
+            self._add_to_pvd(lines)
+        except BaseException as exc:              # also Ctrl-C: a rerun would take the frame for a stranger's
+            if not relisted:
+                _remove_quietly(target)           # a frame the .pvd does not list is no output
+            self.discard()
+            if not isinstance(exc, OSError):
+                raise
+            kept = f"; the {len(self.frames)} frame(s) written before stay listed in it" if self.frames else ""
+            raise self._fail(f"cannot write {self.pvd_path}: {_reason(exc)}{kept}") from None
+        self.frames = [f for f in self.frames if f[1] != target.name] + [(time, target.name)]
+        return target
+
+    def mark_stopped(self, step, message) -> None:
+        """Note in the .pvd, after the last frame, that the run stopped at `step` and why.
+
+        Never raises: the frames and their listing are valid without the note."""
+        self.stopped = (int(step), str(message))
+        if not self._pvd_written:
+            return                                # no frame, no collection to annotate
+        try:
+            self._add_to_pvd([(None, xml_comment(f"run stopped at step {int(step)}: {message}"))])
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        """Finish (idempotent): the .pvd is complete after every frame, nothing is left to write."""
+        self.closed = True
+
+    def discard(self) -> None:
+        """After a failure: remove the output folder if this writer created it and it is empty."""
+        if self.created_dir and not self.frames:
+            try:
+                self.out_dir.rmdir()
+                self.created_dir = False
+            except OSError:
+                pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None:
+            self.discard()
+        self.close()
+        return False
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _fail(self, message: str) -> OutputError:
+        """The OutputError that ends this writer's output (kept in .error for the caller)."""
+        self.error = OutputError(message)
+        return self.error
+
+    def _frame_mesh(self, step, time, points, displacement, fields, cell_fields):
+        """Validate one frame's data; (meshio mesh, time). Nothing is written here."""
         if self.closed:
             raise TensormassError("Writer.write_frame after close()")
         mesh = self.mesh
@@ -153,56 +486,75 @@ class Writer:
             for part in parts:
                 _check_finite(f"cell field {key!r}", part)
 
-        import meshio
-
         from .mesh import to_meshio
         m = to_meshio(mesh, pad_to_3d=True)
         m.points = self._pad(X)
         m.point_data = point_data
         m.cell_data.update(cell_data)
-        target = self.frame_path(step)
-        self._make_dir()
+        return m, time
+
+    def _write_vtu(self, m, target: Path) -> None:
+        """The frame to a temporary name, renamed into place: a reader never sees half a frame."""
+        import meshio
         tmp = self.out_dir / f".{target.name}.tmp"
         try:
             meshio.write(tmp, m, file_format="vtu")
             os.replace(tmp, target)
         except BaseException as exc:
-            _remove(tmp)
+            _remove_quietly(tmp)
             self.discard()
+            kept = f"; the {len(self.frames)} frame(s) written before stay listed in {self.pvd_path}" if self.frames else ""
+            if isinstance(exc, OSError):
+                raise self._fail(f"cannot write frame {target}: {_reason(exc)}{kept}") from None
             if isinstance(exc, Exception) and not isinstance(exc, TensormassError):
-                raise TensormassError(f"could not write {target}: {type(exc).__name__}: {exc}") from exc
+                raise self._fail(f"could not write {target}: {type(exc).__name__}: {exc}") from exc
             raise
-        self.frames = [f for f in self.frames if f[1] != target.name] + [(time, target.name)]
-        self._write_pvd()
-        return target
 
-    def close(self) -> None:
-        """Finish (idempotent): the .pvd is already up to date after every frame."""
-        if not self.closed and self.frames:
-            self._write_pvd()
-        self.closed = True
+    def _add_to_pvd(self, lines) -> None:
+        """Put lines [(frame name or None, text)] before the .pvd's closing tags (OSError on failure).
 
-    def discard(self) -> None:
-        """After a failure: remove the output folder if this writer created it and it is empty."""
-        if self.created_dir and not self.frames:
-            try:
-                self.out_dir.rmdir()
-                self.created_dir = False
-            except OSError:
-                pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is not None:
-            self.discard()
-            self.closed = True
+        Appending costs O(1) per frame; the whole file is written (atomically) only for the
+        first lines of a run, for a frame written again under the same name, or when the
+        closing tags are not where this writer left them (the file was changed under it)."""
+        encoded = [(name, f"    {text}\n".encode("utf-8")) for name, text in lines]
+        names = {name for name, _ in encoded if name is not None}
+        if names & {f for _, f in self.frames}:
+            kept = [(n, b) for n, b in self._lines if n not in names] + encoded
+            self._write_whole_pvd(kept)
+        elif not (self._pvd_written and self._append_pvd(b"".join(b for _, b in encoded))):
+            self._write_whole_pvd(self._lines + encoded)
         else:
-            self.close()
-        return False
+            self._lines += encoded
 
-    # -- helpers -------------------------------------------------------------------------------
+    def _write_whole_pvd(self, lines) -> None:
+        write_bytes_atomic(self.pvd_path, _PVD_HEAD + b"".join(b for _, b in lines) + _PVD_TAIL)
+        self._lines = lines
+        self._pvd_written = True
+
+    def _append_pvd(self, data: bytes) -> bool:
+        """One pwrite of data + closing tags where the closing tags are; False when they are not there.
+
+        Only the last len(closing tags) bytes are read; earlier bytes are neither read nor
+        written. A short or failed write is undone by putting the closing tags back."""
+        try:
+            fd = os.open(self.pvd_path, os.O_RDWR)
+        except FileNotFoundError:
+            return False                          # removed under us: written whole again
+        try:
+            at = os.fstat(fd).st_size - len(_PVD_TAIL)
+            if at < len(_PVD_HEAD) or os.pread(fd, len(_PVD_TAIL), at) != _PVD_TAIL:
+                return False
+            chunk = data + _PVD_TAIL
+            try:
+                if os.pwrite(fd, chunk, at) != len(chunk):
+                    raise OSError(errno.ENOSPC, "No space left on device (short write)")
+            except BaseException:
+                _put_back_tail(fd, at)
+                raise
+            return True
+        finally:
+            os.close(fd)
+
     def _make_dir(self) -> None:
         if not self.out_dir.is_dir():
             try:
@@ -210,7 +562,7 @@ class Writer:
             except FileExistsError:
                 pass
             except OSError as exc:
-                raise TensormassError(f"cannot create output folder {self.out_dir}: {exc}") from None
+                raise self._fail(f"cannot create output folder {self.out_dir}: {_reason(exc)}") from None
             else:
                 self.created_dir = True
 
@@ -241,13 +593,21 @@ class Writer:
             return np.column_stack([arr, np.zeros(len(arr), dtype=arr.dtype)])
         return arr
 
-    def _write_pvd(self) -> None:
-        rows = "\n".join(f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
-                         for t, f in self.frames)
-        text = ('<?xml version="1.0"?>\n'
-                '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
-                '  <Collection>\n'
-                f"{rows}\n"
-                '  </Collection>\n'
-                '</VTKFile>\n')
-        write_text_atomic(self.pvd_path, text)
+
+def _remove_quietly(path) -> None:
+    """Remove a file on a failure path, where a second error would hide the first."""
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+
+
+def _put_back_tail(fd: int, at: int) -> None:
+    """After a failed append: the closing tags at `at` again and nothing after them.
+
+    Rewriting bytes the file already has needs no new disk space."""
+    try:
+        os.pwrite(fd, _PVD_TAIL, at)
+        os.ftruncate(fd, at + len(_PVD_TAIL))
+    except OSError:
+        pass

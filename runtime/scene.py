@@ -202,11 +202,14 @@ class Scene:
     def from_string(cls, text: str, base_dir=None, name: str = "scene", source: str | None = None,
                     load_mesh: bool = True) -> "Scene":
         """Parse TOML text (syntax errors are reported with their line) and validate it."""
+        where = source or "scene"
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
-            where = source or "scene"
             raise SceneError(f"{where}: invalid TOML: {exc}") from None
+        except RecursionError:                # tomllib parses nested arrays/tables recursively
+            raise SceneError(f"{where}: invalid TOML: arrays or inline tables nested too deeply "
+                             "(a scene needs at most a few levels)") from None
         data = dict(data)
         data.setdefault("name", name)
         scene = cls.from_dict(data, base_dir=base_dir, load_mesh=load_mesh)
