@@ -19,6 +19,11 @@ Every direct path therefore returns the solution of an indefinite system too.
 The band factor is kept: the next matrix of the same pattern is first solved
 by CG preconditioned with it (see LinearSolver, reuse).
 
+Every decision (which solver, reuse or refactor, how many iterations) comes from
+the matrix's size, pattern and values, never from measured times: the same
+sequence of systems gives the same bits on an idle or a loaded machine (issue
+#10).  Times are only reported (`LinearSolver.time`).
+
 Dirichlet conditions are applied by elimination before calling these (see
 `ConstrainedSystem`): K_ff x_f = r_f - K_fc x_c.
 """
@@ -70,9 +75,31 @@ BAND_MAX_ENTRIES = 2**28
 DIRECT_TOL = 1e-10
 _REFINE_MAX = 30
 # A kept band factor preconditions CG on the next matrix of the same pattern (the next
-# implicit step or Newton iteration) for at most this many iterations, and at most half
-# of a new factorisation's measured cost, before it is refactored.
+# implicit step or Newton iteration) for at most _REUSE_MAX iterations, and at most half
+# of a new factorisation's modelled cost (below), before it is refactored.
 _REUSE_MAX = 20
+_REUSE_MIN = 3
+# Cost model of the band path: modelled seconds on the benchmark machine (2-core EPYC,
+# 32 MiB L3, one BLAS thread, float32 factor).  It replaces the measured seconds the reuse
+# cap used to come from: those made the decision, and so the bits of the result, depend on
+# the machine load (two identical runs started together differed at 1e-13, issue #10).
+#  - spbtrf does n kd^2 flops at a rate that grows with the band (its blocked level-3
+#    updates need a wide one): 20 Gflop/s at kd 173, 37 at kd 335, 57 at kd 1145, about
+#    _FACTOR_FLOPS kd / (kd + _FACTOR_BLOCK_KD);
+#  - one refinement iteration (two band triangular solves, 4 n kd flops, one sparse
+#    product, 2 nnz, a few vector operations) is memory-bound: 7-10 Gflop/s while the
+#    factor fits in the cache, 5.4-6.3 once it streams from memory, plus ~25 us of calls.
+# Model / best measured (idle), factor and one reuse iteration, on `bench steps` and test
+# step matrices: 1k tetrahedra 0.40 / 0.39 ms, 59 / 62 us; 10k tetrahedra 15 / 17 ms,
+# 0.85 / 0.77 ms; 2k hexahedra 22 / 22 ms, 1.15 / 1.21 ms; 6k hexahedra 133 / 132 ms,
+# 8.2 / 7.6 ms; 20k hexahedra 1.44 / 1.39-1.55 s, 53 / 55-57 ms.  float64 factors: twice
+# the bytes and half the flop rate.
+_FACTOR_FLOPS = 80e9
+_FACTOR_BLOCK_KD = 400.0
+_SOLVE_FLOPS_CACHED = 9.5e9
+_SOLVE_FLOPS_MEMORY = 5.8e9
+_CACHE_BYTES = 32 * 2**20
+_ITERATION_OVERHEAD_S = 25e-6
 # Above this many unknowns "auto" never factorises (a band plan alone would cost too much).
 DIRECT_LIMIT = 200_000
 # IC(0) breaks down on some SPD matrices: retry with these diagonal shifts, then use Jacobi.
@@ -106,6 +133,29 @@ def has_pyamg() -> bool:
     return _pyamg is not None
 
 
+def band_costs(n: int, kd: int, nnz: int, itemsize: int = 4) -> tuple[float, float]:
+    """(factorisation, one refinement iteration) of the band path in modelled seconds (see
+    the cost model above): a function of the pattern and precision alone, never a timing."""
+    n, kd, nnz = float(n), float(kd), float(nnz)
+    slower = itemsize / 4.0                             # float64: twice the bytes, half the rate
+    factor = slower * n * kd * (kd + _FACTOR_BLOCK_KD) / _FACTOR_FLOPS    # n kd^2 flops at the rate above
+    cached = itemsize * n * (kd + 1.0) <= _CACHE_BYTES
+    rate = _SOLVE_FLOPS_CACHED if cached else _SOLVE_FLOPS_MEMORY
+    iteration = slower * (2.0 * nnz + 4.0 * n * kd) / rate + _ITERATION_OVERHEAD_S
+    return factor, iteration
+
+
+def reuse_cap(n: int, kd: int, nnz: int, itemsize: int = 4) -> int:
+    """Most CG iterations a kept band factor gets before refactoring: as many as cost half a
+    new factorisation by the cost model, within [_REUSE_MIN, _REUSE_MAX].
+
+    A function of the pattern alone (n unknowns, half-bandwidth kd, nnz stored entries,
+    the factor's precision), so the same matrices get the same decisions on any load.
+    """
+    factor, iteration = band_costs(n, kd, nnz, itemsize)
+    return int(min(_REUSE_MAX, max(_REUSE_MIN, 0.5 * factor / iteration)))
+
+
 class _BandPlan:
     """A bandwidth-reducing ordering of one sparsity pattern."""
 
@@ -115,6 +165,7 @@ class _BandPlan:
         self.perm, self.iperm, self.kd = band_ordering(A)
         self.work = float(self.n) * float(self.kd) ** 2
         self.entries = (self.kd + 1) * self.n
+        self.nnz = int(A.nnz)
 
     def matches(self, A) -> bool:
         if A.shape[0] != self.n:
@@ -139,7 +190,10 @@ class LinearSolver:
     pattern is first solved by CG preconditioned with it (to the same 1e-10
     relative residual), which takes a few iterations while the matrix changes
     little (consecutive implicit steps, late Newton iterations); otherwise it is
-    refactored.  `last` then ends in "-reuse".
+    refactored.  `last` then ends in "-reuse".  The iteration cap comes from the
+    pattern's cost model (`reuse_cap`), never from timings.
+
+    time: seconds spent in solve, reported only (no decision reads it).
     """
 
     def __init__(self, method: str = "auto", tol: float = 1e-8, max_iterations: int = 1000,
@@ -151,7 +205,7 @@ class LinearSolver:
         self.method, self.tol, self.max_iterations = method, float(tol), int(max_iterations)
         self.preconditioner = preconditioner
         self.converged = True
-        self.time = 0.0
+        self.time = 0.0                          # statistics only: never an input to a decision
         self.last = None
         self.reuse = bool(reuse)
         self._plan = None
@@ -250,9 +304,8 @@ class LinearSolver:
             if self._skip_reuse > 0:
                 self._skip_reuse -= 1
             else:
-                # worth it while cheaper than half a new factorisation
-                cap = int(min(_REUSE_MAX, max(3, 0.5 * old.seconds / max(old.iteration_s or 1.0, 1e-9))))
-                out = _refine(A, b, old, exact=False, max_iterations=cap)
+                # worth it while cheaper than half a new factorisation (modelled, not timed)
+                out = _refine(A, b, old, exact=False, max_iterations=old.reuse_cap)
                 if out is not None:
                     self._reuse_backoff = 0
                     self.last = old.name + "-reuse"
@@ -315,11 +368,12 @@ def _lu(A, b):
 class _BandFactor:
     """A banded Cholesky factor of one matrix (for its pattern's plan); calling it applies A^-1."""
 
-    def __init__(self, plan, c, dtype, seconds):
-        self.plan, self.c, self.dtype, self.seconds = plan, c, dtype, seconds
+    def __init__(self, plan, c, dtype):
+        self.plan, self.c, self.dtype = plan, c, dtype
         self.trs = lapack.spbtrs if dtype is np.float32 else lapack.dpbtrs
         self.name = "band32" if dtype is np.float32 else "band64"
-        self.iteration_s = None                 # measured cost of one refinement iteration
+        # CG iterations it may precondition on a later matrix of the pattern (LinearSolver._band)
+        self.reuse_cap = reuse_cap(plan.n, plan.kd, plan.nnz, np.dtype(dtype).itemsize)
 
     def __call__(self, r):
         perm = self.plan.perm
@@ -331,14 +385,13 @@ class _BandFactor:
 
 def _band_factor(A, plan, dtype):
     """Factor A in band storage in the given precision (call on one BLAS thread); None if not SPD."""
-    start = time.perf_counter()
     ab = np.empty((plan.kd + 1, plan.n), dtype=dtype, order="F")
     _fill_band(A.indptr, A.indices, A.data, plan.iperm, ab)
     factor = lapack.spbtrf if dtype is np.float32 else lapack.dpbtrf
     c, info = factor(ab, lower=1, overwrite_ab=1)
     if info != 0:
         return None                             # not positive definite (in this precision)
-    return _BandFactor(plan, c, dtype, time.perf_counter() - start)
+    return _BandFactor(plan, c, dtype)
 
 
 def _band_solve(A, b, plan):
@@ -351,22 +404,20 @@ def _band_solve(A, b, plan):
         factor = _band_factor(A, plan, dtype)
         if factor is None:
             continue
-        out = _refine(A, b, factor, exact=dtype is np.float64, max_iterations=_REFINE_MAX, factor=factor)
+        out = _refine(A, b, factor, exact=dtype is np.float64, max_iterations=_REFINE_MAX)
         if out is not None:
             return out[0], factor
     return None
 
 
-def _refine(A, b, M, exact, max_iterations, factor=None):
+def _refine(A, b, M, exact, max_iterations):
     """CG on A x = b preconditioned by M ~ A^-1, from x = M b, to DIRECT_TOL.
 
     exact (M is a float64 factor of A): the first iterate is already a direct
     solve; refinement only polishes it and stops when the residual stops
     dropping.  Returns (x, iterations), or None when the iteration does not
-    converge in max_iterations (or breaks down).  factor: records the time per
-    iteration on it.
+    converge in max_iterations (or breaks down).
     """
-    start = time.perf_counter()
     bnorm = np.linalg.norm(b)
     x = M(b)
     r = b - A @ x
@@ -398,8 +449,6 @@ def _refine(A, b, M, exact, max_iterations, factor=None):
         rz_new = r @ z
         p = z + (rz_new / rz) * p
         rz = rz_new
-    if factor is not None:
-        factor.iteration_s = (time.perf_counter() - start) / (its + 1)
     if best_res > DIRECT_TOL * bnorm:               # the recursive residual may drift: check
         true_res = np.linalg.norm(b - A @ best)
         if not (true_res <= DIRECT_TOL * bnorm or (exact and true_res <= 1e-6 * bnorm)):
