@@ -4,18 +4,24 @@
     k = tm.load_kernel("tetra", "stvk", "gauss1", backend="numba")
     summary = tm.Simulation(tm.Scene.from_toml("beam.toml")).run()
     # a run the health monitor does not trust raises tm.RunStopped (its .summary says why)
+
+Every name is imported on first use: `import tensormass` alone loads neither sympy, numpy nor
+numba, so the command line can take Ctrl-C cleanly from its first instant (see launcher.py).
 """
 from .generator import GENERATOR_VERSION as __version__
-from .runtime.errors import (DegenerateElementError, ElementError, InvertedElementError,
-                             KernelNotFoundError, RunInterrupted, RunStopped, TensormassError)
-from .runtime.kernels import Kernel, load_kernel
 
-__all__ = ["__version__", "load_kernel", "Kernel", "Scene", "Simulation", "TensormassError", "ElementError",
-           "InvertedElementError", "DegenerateElementError", "KernelNotFoundError", "RunStopped", "RunInterrupted"]
+_ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "DegenerateElementError",
+           "KernelNotFoundError", "RunStopped", "RunInterrupted")
+__all__ = ["__version__", "load_kernel", "Kernel", "Scene", "Simulation", *_ERRORS]
 
 
 def __getattr__(name):
-    # The runtime pulls in scipy and the assembly code: import it only when used.
+    if name in _ERRORS:
+        from .runtime import errors
+        return getattr(errors, name)
+    if name in ("load_kernel", "Kernel"):
+        from .runtime import kernels
+        return getattr(kernels, name)
     if name == "Scene":
         from .runtime.scene import Scene
         return Scene
