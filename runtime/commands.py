@@ -247,6 +247,20 @@ def _status_rows(data: dict) -> list:
     return [("status", text)]
 
 
+def _health_rows(health) -> list:
+    """What the health monitor measured: the numbers behind the status."""
+    if not health or not health.get("monitor"):
+        return [("health", "not checked (solver.health_monitor = false)")] if health else []
+
+    def num(key, fmt):
+        value = health.get(key)
+        return format(value, fmt) if isinstance(value, (int, float)) else "n/a"
+    return [("health", f"min det F {num('min_det_F', '.4g')} (final {num('min_det_F_final', '.4g')}), "
+                       f"max displacement {num('max_relative_displacement', '.3g')} body sizes, "
+                       f"energy balance growth {num('max_energy_growth', '.3g')} x {num('energy_scale', '.3g')} J; "
+                       f"{_fmt_seconds(health.get('time'))} checking")]
+
+
 # At most this many warnings are listed on the terminal (all of them are in the summary JSON).
 _WARNINGS_SHOWN = 5
 
@@ -303,6 +317,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((f"probe {name}", f"u = {_fmt_vec(u)} m, |u| = {norm:.4g} m"))
         except (TypeError, ValueError):
             rows.append((f"probe {name}", str(u)))
+    rows += _health_rows(data.get("health"))
     rows += _warning_rows(data.get("warnings"), json_path)
     rows += _adapt_rows(data.get("adapt"))
     o = data.get("output")
