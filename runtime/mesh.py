@@ -25,7 +25,8 @@ from .errors import TensormassError
 
 __all__ = [
     "MeshError", "Mesh", "CellBlock", "NODES_PER_CELL", "SOLID_TYPES_3D", "SOLID_TYPES_2D",
-    "read_mesh", "to_meshio", "generate_bar", "check_mesh", "orient_cells", "boundary_faces",
+    "read_mesh", "to_meshio", "generate_bar", "bar_counts", "check_mesh", "check_coordinates", "orient_cells",
+    "boundary_faces", "COORD_MAX",
 ]
 
 NODES_PER_CELL = {
@@ -49,6 +50,11 @@ _TAG_KEYS = ("gmsh:physical", "cell_tags", "medit:ref")
 _DET_TOL = 1e-10
 _PLANE_TOL = 1e-4
 _INSIDE_TOL = 1e-8
+# Kernels and checks raise coordinates to powers up to 6 (h^dim tolerances, squared
+# Jacobian determinants, energies of E h^3 strain^2): beyond 1e50 (1e50^6 = 1e300) they
+# overflow float64's 1.8e308, and a body smaller than 1e-50 underflows the same way.
+COORD_MAX = 1e50
+SIZE_MIN = 1e-50
 
 
 class MeshError(TensormassError):
@@ -510,9 +516,7 @@ def _check_structure(mesh: Mesh) -> None:
     wrong = sorted({b.type for b in mesh.blocks if b.type not in allowed})
     if wrong:
         raise MeshError(f"cell type(s) {', '.join(wrong)} do not fit a {mesh.dim}D mesh")
-    bad_pts = np.flatnonzero(~np.all(np.isfinite(mesh.points), axis=1))
-    if bad_pts.size:
-        raise MeshError(f"non-finite (NaN/Inf) coordinates at points {_fmt_ids(bad_pts, noun='point')}")
+    check_coordinates(mesh.points)
     off = _offsets(mesh)
     out_of_range, repeated = [], []
     for bi, blk in enumerate(mesh.blocks):
@@ -525,6 +529,35 @@ def _check_structure(mesh: Mesh) -> None:
         raise MeshError(f"node index out of range 0..{mesh.n_points - 1} in cells {_fmt_ids(out_of_range)}")
     if repeated.size:
         raise MeshError(f"repeated node within a cell in cells {_fmt_ids(repeated)}")
+
+
+def _fmt_point(p) -> str:
+    return "(" + ", ".join(f"{float(v):g}" for v in p) + ")"
+
+
+def check_coordinates(points) -> None:
+    """Raise MeshError naming a node whose coordinates are NaN/Inf or out of float64's safe range.
+
+    Run before anything that measures the mesh: a NaN coordinate otherwise turns box
+    tolerances into NaN ("no mesh node inside") and 1e200 overflows det J ("degenerate").
+    """
+    points = np.asarray(points, dtype=float)
+    if points.size == 0:
+        return
+    bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+    if bad.size:
+        raise MeshError(f"non-finite (NaN/Inf) coordinates at nodes {_fmt_ids(bad, noun='node')}: "
+                        f"node {int(bad[0])} is at {_fmt_point(points[bad[0]])}")
+    far = np.abs(points).max(axis=1)
+    if far.max() > COORD_MAX:
+        i = int(np.argmax(far))
+        raise MeshError(f"coordinates too large: node {i} is at {_fmt_point(points[i])}, beyond +-{COORD_MAX:g} "
+                        f"({int(np.count_nonzero(far > COORD_MAX))} node(s)); element volumes and energies "
+                        "would overflow float64 (a unit mix-up? coordinates are in meters)")
+    size = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    if len(points) > 1 and 0.0 < size < SIZE_MIN:
+        raise MeshError(f"mesh too small: its bounding box diagonal is {size:g} m, below {SIZE_MIN:g}; element "
+                        "volumes and energies would underflow float64 (a unit mix-up? coordinates are in meters)")
 
 
 def _check_jacobians(mesh: Mesh) -> None:
@@ -965,3 +998,71 @@ def generate_bar(size=(1.0, 0.2, 0.2), cells=(10, 2, 2), element="hexahedron", o
         raise MeshError(f"origin must have {dim} entries")
     build = _bar_3d if dim == 3 else _bar_2d
     return build(size, cells, origin, element)
+
+
+def bar_counts(cells=(10, 2, 2), element="hexahedron") -> tuple:
+    """(cells per type, number of nodes) of generate_bar(size, cells, element), without building it.
+
+    Resource estimates need the counts before a bar too big for the machine is generated;
+    tests check them against generate_bar for every element.
+    """
+    cells = tuple(int(c) for c in cells)
+    if len(cells) not in (2, 3) or min(cells) < 1:
+        raise MeshError(f"need 2 or 3 positive cell counts, got {cells}")
+    grid = int(np.prod([c + 1 for c in cells], dtype=object))
+    boxes = int(np.prod(cells, dtype=object))                 # hexes (quads in 2D) of the grid
+    count = _bar_counts_3d if len(cells) == 3 else _bar_counts_2d
+    return count(cells, element, grid, boxes)
+
+
+def _grid_edges(cells) -> int:
+    """Edges along the axes of a structured grid of cells."""
+    total = 0
+    for axis in range(len(cells)):
+        total += int(np.prod([c if a == axis else c + 1 for a, c in enumerate(cells)], dtype=object))
+    return total
+
+
+def _face_squares(cells) -> int:
+    """Faces of a 3D hex grid (each one carries one diagonal in the Kuhn split)."""
+    nx, ny, nz = cells
+    return nx * ny * (nz + 1) + nx * (ny + 1) * nz + (nx + 1) * ny * nz
+
+
+def _bar_counts_3d(cells, element, grid, hexes):
+    nx, ny, nz = cells
+    if element == "hexahedron":
+        return {"hexahedron": hexes}, grid
+    if element == "tetra":
+        return {"tetra": 6 * hexes}, grid
+    if element == "tetra10":              # one midside node per Kuhn edge: axes, face and body diagonals
+        return {"tetra10": 6 * hexes}, grid + _grid_edges(cells) + _face_squares(cells) + hexes
+    if element == "wedge":
+        return {"wedge": 2 * hexes}, grid
+    if element == "pyramid":
+        return {"pyramid": 6 * hexes}, grid + hexes
+    if element == "mixed":
+        if nx < 4:
+            raise MeshError("element='mixed' needs at least 4 cells along x")
+        s = [len(part) for part in np.array_split(np.arange(nx), 4)]
+        column = ny * nz
+        counts = {"hexahedron": s[0] * column, "wedge": 2 * s[1] * column,
+                  "pyramid": (6 * (s[2] - 1) + 5) * column, "tetra": (2 + 6 * s[3]) * column}
+        return counts, grid + s[2] * column
+    raise MeshError(f"unknown 3D element {element!r} (hexahedron, tetra, tetra10, wedge, pyramid, mixed)")
+
+
+def _bar_counts_2d(cells, element, grid, quads):
+    nx, ny = cells
+    if element == "quad":
+        return {"quad": quads}, grid
+    if element == "triangle":
+        return {"triangle": 2 * quads}, grid
+    if element == "triangle6":            # midside nodes on the grid edges and one diagonal per quad
+        return {"triangle6": 2 * quads}, grid + _grid_edges(cells) + quads
+    if element == "mixed":
+        if nx < 2:
+            raise MeshError("element='mixed' needs at least 2 cells along x")
+        half = nx // 2
+        return {"quad": half * ny, "triangle": 2 * (nx - half) * ny}, grid
+    raise MeshError(f"unknown 2D element {element!r} (triangle, triangle6, quad, mixed)")

@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
 from .. import laws
 from . import kernels as _kernels
+from . import resources
 from .errors import ElementError, TensormassError
 from .mesh import NODES_PER_CELL, Mesh, boundary_faces, check_mesh, generate_bar, read_mesh
 from .scene import Loads, Output, Solver, reachable_laws, switch_parameters
@@ -133,6 +135,8 @@ def build_mesh(spec) -> Mesh:
         mesh = read_mesh(spec.file)
     elif spec.generate in (None, "bar"):
         dim = 2 if spec.element in ("triangle", "triangle6", "quad") or len(spec.cells) == 2 else 3
+        bar = SimpleNamespace(size=tuple(spec.size)[:dim], cells=tuple(spec.cells)[:dim], element=spec.element)
+        resources.check(resources.estimate(resources.MeshCounts.of_bar(bar)), what="the generated bar")
         mesh = generate_bar(tuple(spec.size)[:dim], tuple(spec.cells)[:dim], spec.element,
                             tuple(spec.origin)[:dim])
     else:
@@ -222,21 +226,27 @@ class Model:
 
     def __init__(self, mesh: Mesh, materials, fixed=(), loads: Loads | None = None, probes=(),
                  solver: Solver | None = None, output: Output | None = None, name: str = "model",
-                 check: bool = True, adapt=()):
+                 check: bool = True, adapt=(), max_memory=None):
         start = time.perf_counter()
+        materials, adapt = list(materials), list(adapt)
+        self.solver = solver if solver is not None else Solver()
+        self.max_memory = max_memory
+        # before anything scales with the mesh (check_mesh's face tables, constants, pattern)
+        self.estimate = resources.estimate(resources.MeshCounts.of_mesh(mesh), materials=materials,
+                                           solver=self.solver, adapt=adapt, refinement=False)
+        resources.check(self.estimate, max_memory, what=f"model {name!r}")
         if check:
             check_mesh(mesh)
         self.mesh, self.name = mesh, name
-        self.materials = list(materials)
+        self.materials = materials
         self._specs = (list(fixed), list(probes))          # kept for rebuilt()
-        self.solver = solver if solver is not None else Solver()
         self.output = output if output is not None else Output()
         self.loads = loads if loads is not None else Loads()
         self.dim, self.n_points = mesh.dim, mesh.n_points
         self.n_dofs = self.n_points * self.dim
         self.size = _size(mesh.points)
         self.outputs = outputs_for(self.solver.kind)
-        self.adapt = list(adapt)
+        self.adapt = adapt
         self.groups: list = []                     # LawGroup per set of switchable cells
         self.parts = self._build_parts()
         self.mass = self._lumped_mass()
@@ -253,7 +263,10 @@ class Model:
         built = mesh is None                       # scene_mesh has checked it already
         mesh = scene_mesh(scene) if built else mesh
         model = cls(mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver,
-                    scene.output, scene.name, check=not built, adapt=getattr(scene, "adapt", ()))
+                    scene.output, scene.name, check=not built, adapt=getattr(scene, "adapt", ()),
+                    max_memory=getattr(scene, "max_memory", None))
+        # the scene's estimate covers the whole run (refinement included) when it has one
+        model.estimate = getattr(scene, "estimate", None) or model.estimate
         model.scene = scene
         return model
 
@@ -261,7 +274,7 @@ class Model:
         """The same scene on another mesh (after refinement): parts, masses, constraints and loads anew."""
         fixed, probes = self._specs
         model = Model(mesh, self.materials, fixed, self.loads, probes, self.solver, self.output, self.name,
-                      adapt=self.adapt)
+                      adapt=self.adapt, max_memory=self.max_memory)
         model.scene = self.scene
         return model
 
@@ -361,6 +374,7 @@ class Model:
     def _constraints(self, fixed) -> tuple:
         """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
         target = np.full(self.n_dofs, np.nan)
+        owner = np.full(self.n_dofs, -1, dtype=np.int64)
         for i, fx in enumerate(fixed):
             nodes = self._nodes_in(fx.box, f"fixed[{i}]")
             comps = np.arange(self.dim) if fx.components is None else np.asarray(fx.components, dtype=int)
@@ -368,7 +382,10 @@ class Model:
                 raise TensormassError(f"fixed[{i}].components must be in 0..{self.dim - 1}, got {fx.components!r}")
             disp = (np.zeros(self.dim) if fx.displacement is None
                     else self._vector(fx.displacement, f"fixed[{i}].displacement"))
-            target[(nodes[:, None] * self.dim + comps).ravel()] = np.tile(disp[comps], nodes.size)
+            dofs = (nodes[:, None] * self.dim + comps).ravel()
+            values = np.tile(disp[comps], nodes.size)
+            self._refuse_conflict(target, owner, dofs, values, i)
+            target[dofs], owner[dofs] = values, i
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
         used = np.zeros(self.n_points, bool)
@@ -378,6 +395,15 @@ class Model:
         target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
         dofs = np.flatnonzero(~np.isnan(target))
         return dofs, target[dofs]
+
+    def _refuse_conflict(self, target, owner, dofs, values, i) -> None:
+        """Two [[fixed]] entries giving one dof different values: refused (the order would decide)."""
+        clash = np.flatnonzero(~np.isnan(target[dofs]) & (target[dofs] != values))
+        if clash.size:
+            dof = int(dofs[clash[0]])
+            raise TensormassError(f"fixed[{i}]: prescribes component {dof % self.dim} = {values[clash[0]]:g} at node "
+                                  f"{dof // self.dim} where fixed[{int(owner[dof])}] prescribes {target[dof]:g}; "
+                                  "overlapping boxes need the same values")
 
     def _external_forces(self) -> np.ndarray:
         f = (self.mass.reshape(-1, self.dim) * self._vector(self.loads.gravity, "loads.gravity")).ravel()

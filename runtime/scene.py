@@ -182,11 +182,16 @@ class Scene:
     name: str = "scene"
     description: str = ""
     source: str | None = None             # the scene file, when read from one
+    max_memory: int | str | None = None   # memory limit (bytes or "8G"); None: see runtime.resources
 
     # -- reading ------------------------------------------------------------------------------
     @classmethod
-    def from_toml(cls, path, load_mesh: bool = True) -> "Scene":
-        """Read and validate a scene file; relative mesh paths are relative to its folder."""
+    def from_toml(cls, path, load_mesh: bool = True, max_memory=None) -> "Scene":
+        """Read and validate a scene file; relative mesh paths are relative to its folder.
+
+        max_memory: bytes or a size such as "8G"; the run is refused (ResourceError) when its
+        estimate is above it.  None: $TENSORMASS_MAX_MEMORY, else most of the available memory.
+        """
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
@@ -195,12 +200,12 @@ class Scene:
         except (OSError, UnicodeDecodeError) as exc:
             raise SceneError(f"cannot read scene file {path}: {exc}") from None
         scene = cls.from_string(text, base_dir=path.parent, name=path.stem, source=str(path),
-                                load_mesh=load_mesh)
+                                load_mesh=load_mesh, max_memory=max_memory)
         return scene
 
     @classmethod
     def from_string(cls, text: str, base_dir=None, name: str = "scene", source: str | None = None,
-                    load_mesh: bool = True) -> "Scene":
+                    load_mesh: bool = True, max_memory=None) -> "Scene":
         """Parse TOML text (syntax errors are reported with their line) and validate it."""
         where = source or "scene"
         try:
@@ -212,12 +217,12 @@ class Scene:
                              "(a scene needs at most a few levels)") from None
         data = dict(data)
         data.setdefault("name", name)
-        scene = cls.from_dict(data, base_dir=base_dir, load_mesh=load_mesh)
+        scene = cls.from_dict(data, base_dir=base_dir, load_mesh=load_mesh, max_memory=max_memory)
         scene.source = source
         return scene
 
     @classmethod
-    def from_dict(cls, data, base_dir=None, load_mesh: bool = True) -> "Scene":
+    def from_dict(cls, data, base_dir=None, load_mesh: bool = True, max_memory=None) -> "Scene":
         """Validate a scene given as plain data (what tomllib returns).
 
         With load_mesh (the default) the mesh is generated or read here, so that
@@ -225,7 +230,7 @@ class Scene:
         cells without a material, boxes that hold no node, vector sizes of file
         meshes) is checked before anything runs; see load_mesh() and validate().
         """
-        return _Parser(base_dir).scene(data, load_mesh)
+        return _Parser(base_dir).scene(data, load_mesh, max_memory)
 
     # -- the mesh -------------------------------------------------------------------------------
     @property
@@ -239,20 +244,40 @@ class Scene:
         return None
 
     def load_mesh(self):
-        """The mesh (generated or read once, then cached); MeshError-based problems become SceneError."""
+        """The mesh (generated or read once, then cached); MeshError-based problems become SceneError.
+
+        The run's memory is estimated and checked against the limit (max_memory) first: for
+        a generated bar before it is built, for a file right after it is read (ResourceError).
+        """
         mesh = getattr(self, "_mesh", None)
         if mesh is None:
-            from .mesh import MeshError, generate_bar, read_mesh
+            from .mesh import MeshError, check_coordinates, generate_bar, read_mesh
+            from .resources import MeshCounts
+            key = "mesh.file" if self.mesh.file is not None else "mesh"
             try:
                 if self.mesh.file is not None:
                     mesh = read_mesh(self.mesh.file)
+                    check_coordinates(mesh.points)
+                    self._check_resources(MeshCounts.of_mesh(mesh))
                 else:
+                    self._check_resources(MeshCounts.of_bar(self.mesh))
                     mesh = generate_bar(self.mesh.size, self.mesh.cells, self.mesh.element, self.mesh.origin)
+                    check_coordinates(mesh.points)
             except MeshError as exc:
-                key = "mesh.file" if self.mesh.file is not None else "mesh"
                 raise SceneError(f"{key}: {exc}") from None
             self._mesh = mesh
         return mesh
+
+    def _check_resources(self, counts) -> None:
+        from . import resources
+        est = resources.estimate(counts, materials=self.materials, solver=self.solver, adapt=self.adapt)
+        resources.check(est, self.max_memory, what=f"scene {self.name!r}")
+        self._estimate = est
+
+    @property
+    def estimate(self):
+        """The run's resource estimate (runtime.resources.Estimate) made by load_mesh; None before."""
+        return getattr(self, "_estimate", None)
 
     def assign_materials(self, mesh=None) -> list:
         """Per cell block, the index into self.materials of each cell (-1: no material matches)."""
@@ -261,18 +286,9 @@ class Scene:
         out = []
         for blk in mesh.blocks:
             which = np.full(len(blk), -1, dtype=np.int64)
-            centroids = mesh.points[blk.cells].mean(axis=1) if len(blk) else np.zeros((0, mesh.dim))
+            centroids = _centroids(mesh, blk)
             for i, mat in enumerate(self.materials):
-                if isinstance(mat.region, str) and mat.region not in ("all", blk.type):
-                    continue
-                hit = np.ones(len(blk), dtype=bool)
-                if not isinstance(mat.region, str):
-                    if blk.tags is None:
-                        continue
-                    hit &= blk.tags == int(mat.region)
-                if mat.box is not None:
-                    hit &= box_contains(mat.box, centroids, tol)
-                which[(which < 0) & hit] = i
+                which[(which < 0) & _material_mask(mat, blk, centroids, tol)] = i
             out.append(which)
         return out
 
@@ -285,6 +301,24 @@ class Scene:
     def to_dict(self) -> dict:
         """Plain data (for summaries); not guaranteed to round-trip through from_dict."""
         return asdict(self)
+
+
+def _centroids(mesh, blk) -> np.ndarray:
+    return mesh.points[blk.cells].mean(axis=1) if len(blk) else np.zeros((0, mesh.dim))
+
+
+def _material_mask(mat: Material, blk, centroids, tol: float) -> np.ndarray:
+    """Cells of a block that a material's region (and box) select, ignoring earlier materials."""
+    if isinstance(mat.region, str) and mat.region not in ("all", blk.type):
+        return np.zeros(len(blk), dtype=bool)
+    hit = np.ones(len(blk), dtype=bool)
+    if not isinstance(mat.region, str):
+        if blk.tags is None:
+            return np.zeros(len(blk), dtype=bool)
+        hit &= blk.tags == int(mat.region)
+    if mat.box is not None:
+        hit &= box_contains(mat.box, centroids, tol)
+    return hit
 
 
 # ============================================================================== box helpers
@@ -324,6 +358,16 @@ ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
 
 SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
+# The cheapest step there is (explicit, one hexahedron) takes ~35 us on the benchmark
+# machine: 1e8 steps are an hour for a single cell and days for any real mesh (static
+# load steps cost a Newton solve each).  More is a typo (1e12, an extra 000), refused
+# before the run rather than discovered hours into it.
+MAX_STEPS = 100_000_000
+_MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days on a real mesh"
+# A probe reports the displacement of its nearest node: farther than this share of the
+# body's size (bounding box diagonal) from every node, and farther than the largest cell,
+# it is not on the body.
+PROBE_TOLERANCE = 0.1
 LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
 BACKENDS = ("numba", "c")
@@ -389,11 +433,22 @@ class _Parser:
         return value
 
     @staticmethod
-    def integer(value, key, min_value=None) -> int:
+    def integer(value, key, min_value=None, max_value=None, why="") -> int:
+        """An int in [min_value, max_value]; why: the reason for max_value, for the message."""
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SceneError(f"{key}: expected an integer, got {_type_name(value)} {_fmt(value)}")
+            hint = ""
+            if isinstance(value, float) and value.is_integer():
+                # TOML reads 1e12 and 100.0 as floats: say so, and what the integer would hit
+                hint = " (TOML reads numbers with an exponent or a decimal point as floats"
+                if max_value is not None and value > max_value:
+                    hint += f"; and {int(value):,} is above the limit of {max_value:,}{': ' + why if why else ''})"
+                else:
+                    hint += f": write {int(value)})"
+            raise SceneError(f"{key}: expected an integer, got {_type_name(value)} {_fmt(value)}{hint}")
         if min_value is not None and value < min_value:
             raise SceneError(f"{key}: must be >= {min_value} (got {value})")
+        if max_value is not None and value > max_value:
+            raise SceneError(f"{key}: must be <= {max_value:,} (got {value:,}){': ' + why if why else ''}")
         return int(value)
 
     @staticmethod
@@ -435,7 +490,7 @@ class _Parser:
         return (lo, hi)
 
     # -- tables -----------------------------------------------------------------------------
-    def scene(self, data, load_mesh) -> Scene:
+    def scene(self, data, load_mesh, max_memory=None) -> Scene:
         data = self.table(data, "scene")
         self.keys(data, "", _TOP)
         if "mesh" not in data:
@@ -461,7 +516,8 @@ class _Parser:
             raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
                              "(without constraints the stiffness matrix is singular)")
         scene = Scene(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver,
-                      probes=probes, output=output, adapt=adapt, name=name, description=description)
+                      probes=probes, output=output, adapt=adapt, name=name, description=description,
+                      max_memory=max_memory)
         if load_mesh:
             scene.validate(scene.load_mesh())
         return scene
@@ -511,6 +567,7 @@ class _Parser:
             raise SceneError(f"mesh.cells[0]: element = \"mixed\" needs at least {4 if self.dim == 3 else 2} "
                              f"cells along x (got {cells[0]})")
         origin = self.vector(t["origin"], "mesh.origin") if "origin" in t else (0.0,) * self.dim
+        _check_bar_extent(size, origin)
         return MeshSpec(generate="bar", file=None, size=size, cells=cells, element=element, origin=origin)
 
     def material(self, t, key) -> Material:
@@ -632,7 +689,7 @@ class _Parser:
         if "dt" in t:
             s.dt = self.number(t["dt"], "solver.dt", positive=True)
         if "steps" in t:
-            s.steps = self.integer(t["steps"], "solver.steps", 1)
+            s.steps = self.integer(t["steps"], "solver.steps", 1, MAX_STEPS, _MAX_STEPS_WHY)
         if "linear" in t:
             s.linear = self.string(t["linear"], "solver.linear", LINEAR_SOLVERS)
         for k in ("cg_tolerance", "newton_tolerance"):
@@ -725,6 +782,18 @@ class _Parser:
         return out
 
 
+def _check_bar_extent(size, origin) -> None:
+    """A generated bar's coordinates must stay where float64 computes volumes and energies."""
+    from .mesh import COORD_MAX
+    for i, (s, o) in enumerate(zip(size, origin)):
+        far = max(abs(o), abs(o + s))
+        if not far <= COORD_MAX:
+            key = f"mesh.origin[{i}]" if abs(o) > COORD_MAX else f"mesh.size[{i}]"
+            raise SceneError(f"{key}: coordinates too large: the bar reaches {_fmt(far)} m along axis {i}, beyond "
+                             f"+-{COORD_MAX:g}; element volumes and energies would overflow float64 "
+                             "(a unit mix-up? coordinates are in meters)")
+
+
 def _catalogue_check(key, element, law, quadrature):
     """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
     from ..generator.catalogue import entries, quadratures
@@ -758,6 +827,11 @@ def _check_native(key, law, native, dim):
 
 
 def _check_against_mesh(scene: Scene, mesh) -> None:
+    from .mesh import MeshError, check_coordinates
+    try:                                  # NaN would make every box test below fail
+        check_coordinates(mesh.points)
+    except MeshError as exc:
+        raise SceneError(f"{'mesh.file' if scene.mesh.file is not None else 'mesh'}: {exc}") from None
     dim = mesh.dim
 
     def vec(value, key):
@@ -795,6 +869,8 @@ def _check_against_mesh(scene: Scene, mesh) -> None:
             raise SceneError(f"{key}.box: no mesh node inside{bounds}")
     for i, p in enumerate(scene.probes):
         vec(p.point, f"probe[{i}].point")
+    prescribed_values(scene.fixed, mesh.points, tol)
+    _check_probes(scene, mesh)
 
     # every cell needs a material, and every (cell type, law, quadrature) in use must exist
     which = scene.assign_materials(mesh)
@@ -810,7 +886,97 @@ def _check_against_mesh(scene: Scene, mesh) -> None:
             m = scene.materials[int(i)]
             _catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
         offset += len(blk)
+    _check_unused_materials(scene, mesh, which)
     _check_adapt(scene, mesh, which)
+
+
+def prescribed_values(fixed, points, tol: float):
+    """(value, owner) per node and component: the prescribed displacement (NaN: free) and the
+    index of the [[fixed]] entry that prescribes it.
+
+    Two entries prescribing different values for the same dof are refused (SceneError
+    naming both and a node): which one wins would otherwise depend on their order.
+    """
+    n, dim = points.shape
+    value = np.full((n, dim), np.nan)
+    owner = np.full((n, dim), -1, dtype=np.int64)
+    for i, f in enumerate(fixed):
+        nodes = np.flatnonzero(box_contains(f.box, points, tol))
+        disp = np.zeros(dim) if f.displacement is None else np.asarray(f.displacement, dtype=float)[:dim]
+        for c in range(dim) if f.components is None else f.components:
+            old = value[nodes, c]
+            clash = np.flatnonzero(~np.isnan(old) & (old != disp[c]))
+            if clash.size:
+                node = int(nodes[clash[0]])
+                j = int(owner[node, c])
+                where = ", ".join(f"{float(x):g}" for x in points[node])
+                raise SceneError(f"fixed[{i}]: prescribes component {c} = {disp[c]:g} at node {node} ([{where}]) "
+                                 f"where fixed[{j}] prescribes {old[clash[0]]:g} ({clash.size} node(s) in "
+                                 "both boxes); the boxes overlap with different values: narrow one box, or "
+                                 "use components = [...] so that each component is prescribed once")
+            value[nodes, c] = disp[c]
+            owner[nodes, c] = i
+    return value, owner
+
+
+def _check_probes(scene: Scene, mesh) -> None:
+    """A probe reports its nearest node: refuse probes that are not on the body."""
+    if not scene.probes or not mesh.n_points:
+        return
+    size = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
+    cell = None                           # largest cell diagonal, computed only when needed
+    for i, p in enumerate(scene.probes):
+        d2 = np.sum((mesh.points - np.asarray(p.point, dtype=float)) ** 2, axis=1)
+        node = int(np.argmin(d2))
+        dist = math.sqrt(float(d2[node]))
+        if dist <= PROBE_TOLERANCE * size:
+            continue
+        cell = _largest_cell(mesh) if cell is None else cell
+        if dist <= cell:                  # inside a coarse cell: its nodes are all that far
+            continue
+        at = ", ".join(f"{float(x):g}" for x in mesh.points[node])
+        raise SceneError(f"probe[{i}].point: probe {p.name!r} at {list(p.point)} is {dist:.3g} m from the nearest "
+                         f"mesh node (node {node} at [{at}]), more than {PROBE_TOLERANCE:.0%} of the body's size "
+                         f"({size:.3g} m) and than its largest cell ({cell:.3g} m): it is not on the body, and "
+                         "a probe reports the displacement of its nearest node")
+
+
+def _largest_cell(mesh) -> float:
+    """Largest bounding-box diagonal of a cell (in chunks: no (n_cells, k, dim) copy of a big mesh)."""
+    big = 0.0
+    for blk in mesh.blocks:
+        for start in range(0, len(blk), 65536):
+            x = mesh.points[blk.cells[start:start + 65536]]
+            big = max(big, float(np.sqrt(np.sum((x.max(axis=1) - x.min(axis=1)) ** 2, axis=1)).max()))
+    return big
+
+
+def _check_unused_materials(scene: Scene, mesh, which) -> None:
+    """Every [[material]] must model some cell: one that none does is a mistake in the scene."""
+    used = set()
+    for w in which:
+        used.update(int(i) for i in np.unique(w))
+    for i, mat in enumerate(scene.materials):
+        if i not in used:
+            raise SceneError(f"material[{i}]: no cell uses it: {_why_unused(scene, mesh, which, i)}; "
+                             "remove it, or change its region or box")
+
+
+def _why_unused(scene: Scene, mesh, which, i: int) -> str:
+    """The region/box matches nothing, or every cell it matches went to earlier materials."""
+    tol = box_tolerance(mesh.points)
+    earlier = set()
+    for blk, w in zip(mesh.blocks, which):
+        hit = _material_mask(scene.materials[i], blk, _centroids(mesh, blk), tol)
+        earlier.update(int(j) for j in np.unique(w[hit]))
+    mat = scene.materials[i]
+    if earlier:
+        names = ", ".join(f"material[{j}]" for j in sorted(earlier))
+        return f"every cell it matches is taken by {names} (first match wins)"
+    what = f"region {mat.region!r}" + ("" if mat.box is None else " and box")
+    types = ", ".join(mesh.cell_types())
+    tags = sorted({int(t) for b in mesh.blocks if b.tags is not None for t in np.unique(b.tags)})
+    return f"no cell matches its {what} (the mesh has {types} cells" + (f", tags {tags})" if tags else ", no tags)")
 
 
 def _check_adapt(scene: Scene, mesh, which) -> None:

@@ -1,0 +1,235 @@
+"""Resource estimates (runtime.resources): counts without building, limits, refusals before allocating."""
+from __future__ import annotations
+
+import tracemalloc
+
+import meshio
+import numpy as np
+import pytest
+
+from tensormass.generator.cli import main
+from tensormass.runtime import mesh as mesh_module
+from tensormass.runtime import resources
+from tensormass.runtime.mesh import bar_counts, generate_bar, to_meshio
+from tensormass.runtime.resources import MeshCounts, ResourceError, estimate, limit_bytes, parse_size
+from tensormass.runtime.scene import Scene
+
+GiB = 2 ** 30
+
+
+def bar_scene(cells=(4, 1, 1), element="hexahedron", **solver):
+    return {"mesh": {"generate": "bar", "size": [1.0, 0.2, 0.2][:len(cells)], "cells": list(cells),
+                     "element": element},
+            "material": [{"law": "stvk", "E": 1e6, "nu": 0.3}],
+            "fixed": [{"box": [[-1e-9, -1, -1][:len(cells)], [1e-9, 1, 1][:len(cells)]]}],
+            "loads": {"gravity": [0.0, 0.0, -9.81][:len(cells)]},
+            "solver": {"kind": "implicit_euler", "steps": 2, **solver}}
+
+
+@pytest.fixture
+def no_generation(monkeypatch):
+    """A bar too big to build must never reach the generator."""
+    monkeypatch.setattr(mesh_module, "generate_bar", lambda *a, **k: pytest.fail("the bar was generated"))
+
+
+# ------------------------------------------------------------------------------ counts
+
+
+@pytest.mark.parametrize("element,cells", [
+    ("hexahedron", (3, 2, 2)), ("tetra", (3, 2, 1)), ("tetra10", (2, 3, 2)), ("wedge", (3, 2, 2)),
+    ("pyramid", (2, 2, 3)), ("mixed", (4, 1, 1)), ("mixed", (9, 2, 3)),
+    ("quad", (3, 2)), ("triangle", (3, 2)), ("triangle6", (3, 2)), ("mixed", (5, 3)),
+])
+def test_bar_counts_match_the_generated_bar(element, cells):
+    mesh = generate_bar((1.0, 0.3, 0.2)[:len(cells)], cells, element)
+    built = {}
+    for b in mesh.blocks:
+        built[b.type] = built.get(b.type, 0) + len(b)
+    assert bar_counts(cells, element) == (built, mesh.n_points)
+
+
+def test_counts_of_a_bar_and_of_its_mesh_give_the_same_estimate():
+    scene = Scene.from_dict(bar_scene((12, 3, 3), "tetra"), load_mesh=False)
+    from_spec = estimate(scene)
+    scene.load_mesh()
+    from_mesh = estimate(scene)
+    assert from_spec.cells == from_mesh.cells == {"tetra": 6 * 12 * 9}
+    assert from_spec.nodes == from_mesh.nodes
+    assert from_mesh.bytes == pytest.approx(from_spec.bytes, rel=0.02)
+
+
+@pytest.mark.parametrize("element", ["hexahedron", "tetra", "tetra10", "wedge", "pyramid"])
+def test_nonzeros_are_estimated_from_above(element):
+    from tensormass.runtime.assembly import SparsePattern
+    mesh = generate_bar((1.0, 0.2, 0.2), (12, 3, 3), element)
+    dofs = [(b.cells[:, :, None] * 3 + np.arange(3)).reshape(len(b), -1) for b in mesh.blocks]
+    nnz = SparsePattern(dofs, mesh.n_points * 3).nnz
+    est = estimate(MeshCounts.of_mesh(mesh))
+    assert nnz <= est.nnz <= 2 * nnz
+
+
+# ------------------------------------------------------------------------------ limits
+
+
+def test_sizes_and_limits(monkeypatch):
+    assert parse_size("8G") == 8 * GiB
+    assert parse_size("500M") == 500 * 2 ** 20
+    assert parse_size("1.5GiB") == int(1.5 * GiB)
+    assert parse_size("2e9") == 2_000_000_000
+    assert parse_size(12345) == 12345
+    for bad in ("lots", "-1G", "0", "8X", True, float("nan")):
+        with pytest.raises(ResourceError, match="--max-memory"):
+            parse_size(bad)
+    monkeypatch.delenv(resources.ENV_MAX_MEMORY, raising=False)
+    monkeypatch.setattr(resources, "available_memory", lambda: 10 * GiB)
+    assert limit_bytes(None)[0] == int(10 * GiB * resources.SAFETY_FRACTION)
+    monkeypatch.setenv(resources.ENV_MAX_MEMORY, "3G")
+    assert limit_bytes(None) == (3 * GiB, resources.ENV_MAX_MEMORY)
+    assert limit_bytes("1G")[0] == GiB                          # the argument beats the environment
+    monkeypatch.setenv(resources.ENV_MAX_MEMORY, "plenty")
+    with pytest.raises(ResourceError, match=resources.ENV_MAX_MEMORY):
+        limit_bytes(None)
+
+
+def test_available_memory_reads_the_machine():
+    avail = resources.available_memory()
+    assert avail is None or avail > 0
+
+
+def test_constants_mirror_the_runtime():
+    """resources copies a few numbers so that it can refuse a scene before numba is imported."""
+    from tensormass.runtime import simulation, solvers
+    assert resources.AUTO_DIRECT_BELOW == solvers.AUTO_DIRECT_BELOW
+    assert resources.DIRECT_LIMIT == solvers.DIRECT_LIMIT
+    assert resources.AUTO_BAND_WORK_PER_NNZ == solvers.AUTO_BAND_WORK_PER_NNZ
+    assert resources.BAND_MAX_ENTRIES == solvers.BAND_MAX_ENTRIES
+    assert resources.HISTORY_ROWS >= simulation.HISTORY_MAX
+
+
+# ------------------------------------------------------------------------------ refusals
+
+
+def test_huge_bar_is_refused_before_it_is_generated(no_generation):
+    data = bar_scene((1000, 1000, 300))
+    with pytest.raises(ResourceError) as info:
+        Scene.from_dict(data, max_memory="8G")
+    text = str(info.value)
+    assert "300,000,000 hexahedron cells" in text and "TiB" in text
+    assert "above the limit of 8 GiB" in text and "--max-memory" in text
+
+
+def test_huge_bar_is_refused_with_the_machine_default(no_generation, monkeypatch):
+    monkeypatch.delenv(resources.ENV_MAX_MEMORY, raising=False)
+    monkeypatch.setattr(resources, "available_memory", lambda: 64 * GiB)
+    with pytest.raises(ResourceError, match=r"80% of the 64 GiB available"):
+        Scene.from_dict(bar_scene((1000, 1000, 300)))
+
+
+def test_mesh_file_is_refused_right_after_reading(tmp_path, monkeypatch):
+    path = tmp_path / "part.vtu"
+    meshio.write(path, to_meshio(generate_bar((1.0, 0.2, 0.2), (8, 2, 2), "tetra")))
+    data = bar_scene()
+    data["mesh"] = {"file": str(path)}
+    # nothing that scales with the mesh may run: the scene's checks against it come first
+    monkeypatch.setattr(Scene, "validate", lambda *a, **k: pytest.fail("validated a refused mesh"))
+    with pytest.raises(ResourceError, match=r"192 tetra cells, 81 nodes.*above the limit of 1 MiB"):
+        Scene.from_dict(data, max_memory="1M")
+
+
+def test_model_checks_the_limit_before_building(monkeypatch):
+    from tensormass.runtime.model import Model
+    from tensormass.runtime.scene import Material
+    mesh = generate_bar((1.0, 0.2, 0.2), (6, 2, 2))
+    monkeypatch.setattr(mesh_module, "check_mesh", lambda m: pytest.fail("checked a refused mesh"))
+    with pytest.raises(ResourceError, match="model 'model' needs an estimated"):
+        Model(mesh, [Material(E=1e6, nu=0.3)], max_memory="1M")
+
+
+def test_python_api_and_environment(tmp_path, monkeypatch):
+    from tensormass.runtime.model import Model
+    text = ('[mesh]\ngenerate = "bar"\ncells = [4, 1, 1]\n[[material]]\nE = 1e6\nnu = 0.3\n'
+            '[[fixed]]\nbox = [[0, 0, 0], [0, 1, 1]]\n')
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(ResourceError, match="above the limit of 10 MiB"):
+        Scene.from_toml(path, max_memory=10 * 2 ** 20)
+    scene = Scene.from_toml(path, load_mesh=False, max_memory="10M")     # what Simulation(scene) goes through
+    with pytest.raises(ResourceError):
+        Model.from_scene(scene)
+    monkeypatch.setenv(resources.ENV_MAX_MEMORY, "10M")
+    with pytest.raises(ResourceError, match=f"10 MiB \\({resources.ENV_MAX_MEMORY}\\)"):
+        Scene.from_toml(path)
+    scene = Scene.from_toml(path, max_memory="64G")
+    assert scene.estimate is not None and scene.estimate.bytes > resources.BASELINE
+    assert Model.from_scene(scene).estimate is scene.estimate
+
+
+def test_cli_max_memory(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv(resources.ENV_MAX_MEMORY, raising=False)
+    path = tmp_path / "big.toml"
+    path.write_text('[mesh]\ngenerate = "bar"\ncells = [1000, 1000, 300]\n[[material]]\nE = 1e6\nnu = 0.3\n'
+                    '[[fixed]]\nbox = [[0, 0, 0], [0, 1, 1]]\n')
+    monkeypatch.setattr(mesh_module, "generate_bar", lambda *a, **k: pytest.fail("the bar was generated"))
+    assert main(["run", str(path), "--max-memory", "16G", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("tensormass: error: scene 'big' needs an estimated") and "16 GiB" in err
+    assert not (tmp_path / "out").exists()
+    assert main(["run", str(path), "--max-memory", "sixteen"]) == 2
+    assert "--max-memory: expected a size" in capsys.readouterr().err
+    assert main(["demo", "--max-memory", "1M", "--out", str(tmp_path / "demo")]) == 2
+    assert "above the limit of 1 MiB" in capsys.readouterr().err
+
+
+def test_refinement_rounds_grow_the_estimate():
+    data = bar_scene((8, 2, 2), "tetra")
+    plain = estimate(Scene.from_dict(data, load_mesh=False))
+    data["adapt"] = [{"criterion": "R_L", "threshold": 0.1, "action": "refine", "rounds": 2}]
+    refined = estimate(Scene.from_dict(data, load_mesh=False))
+    assert refined.cells["tetra"] == 4 * plain.cells["tetra"] and refined.bytes > plain.bytes
+
+
+# ------------------------------------------------------------------------------ calibration
+
+
+def _warm(data):
+    """Load and compile the kernels once, so that the measured run allocates only its arrays."""
+    from tensormass.runtime.integrators import Context, make_integrator
+    from tensormass.runtime.model import Model
+    small = dict(data, mesh=dict(data["mesh"], cells=[1, 1, 1]))
+    model = Model.from_scene(Scene.from_dict(small))
+    model.warm_up()
+    ctx = Context(model)
+    ctx.asm.warm_up()
+    make_integrator(ctx).step(1)
+
+
+def _measured_peak(data) -> tuple:
+    """(traced peak bytes of mesh, model, pattern and two steps; the scene's estimate)."""
+    from tensormass.runtime.integrators import Context, make_integrator
+    from tensormass.runtime.model import Model
+    scene = Scene.from_dict(data, load_mesh=False, max_memory="64G")
+    tracemalloc.start()
+    try:
+        scene.load_mesh()
+        model = Model.from_scene(scene)
+        model.warm_up()
+        ctx = Context(model)
+        ctx.asm.warm_up()
+        integrator = make_integrator(ctx)
+        integrator.step(1)
+        integrator.step(2)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return peak, scene.estimate
+
+
+@pytest.mark.parametrize("element,project", [("hexahedron", True), ("hexahedron", False), ("tetra", True)])
+def test_estimate_is_above_a_measured_run_and_within_twice_it(element, project):
+    """What the arrays of a real run take (tracemalloc: numpy reports its allocations), against
+    the estimate without its fixed runtime part (interpreter and libraries, not traced)."""
+    data = bar_scene((16, 6, 6) if element == "hexahedron" else (12, 4, 4), element, project_psd=project)
+    _warm(data)
+    peak, est = _measured_peak(data)
+    arrays = est.bytes - est.parts["runtime"]
+    assert peak <= arrays <= 2 * peak
