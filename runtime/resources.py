@@ -24,18 +24,24 @@ The peak is modelled phase by phase after what the runtime allocates:
 
 peak = runtime + mesh + history + max(mesh check, model + pattern build, model + pattern + step).
 
-Calibration (peak RSS of `tensormass run` through /usr/bin/time -v on the 2-core, 23 GB
-benchmark machine, warm numba cache, implicit Euler, StVK gauss2, linear = "auto"):
+Calibration (peak RSS of whole runs through /usr/bin/time on the 2-core, 23 GB benchmark
+machine, warm numba cache, StVK gauss2, linear = "auto", 2 steps):
 
-    hexahedron bar  40 x 8 x 8   (2 560 cells):  estimate  416 MB, measured  300 MB (1.39x)
-    hexahedron bar  80 x 16 x 16 (20 480 cells): estimate 1451 MB, measured  960 MB (1.51x)
-    hexahedron bar 120 x 24 x 24 (69 120 cells): estimate 4319 MB, measured 2898 MB (1.49x)
-    tetra bar       80 x 16 x 16 (122 880 cells): estimate 2119 MB, measured 1467 MB (1.44x)
+    bar, cells                        solver            estimate   measured   ratio
+    hexahedron  40x8x8    (2 560)     implicit_euler     522 MiB    297 MiB   1.76
+    hexahedron  80x16x16  (20 480)    implicit_euler    1641 MiB    945 MiB   1.74
+    hexahedron 120x24x24  (69 120)    implicit_euler    4728 MiB   2692 MiB   1.76
+    tetra       80x16x16  (122 880)   implicit_euler    2027 MiB   1309 MiB   1.55
+    tetra10     40x8x8    (15 360)    implicit_euler    1822 MiB   1032 MiB   1.77
+    tetra10     20x4x4    (1 920)     static             580 MiB    310 MiB   1.87
+    hexahedron  80x16x16  (20 480)    explicit          1085 MiB    946 MiB   1.15
+    with project_psd = true (2 560, 20 480 hexahedra, 122 880 tetra, 15 360 tetra10): 1.31-1.49
 
 The estimate sits on the upper side by design: it assumes PSD projection may switch on
 (the default project_psd = None does so when a Newton step fails to descend), every dof
-free, and unstructured node adjacency.  Times are rough (within ~3x): kernel operation
-counts from the manifest, scatter entries and the solver's own cost models.
+free, and unstructured node adjacency.  Times are rough (within ~5x): kernel operation
+counts from the manifest, scatter entries and the solver's own cost models; on the runs
+above they came out at 0.4-4.6x the measured time per step.
 """
 from __future__ import annotations
 
