@@ -156,7 +156,16 @@ def fmt_bytes(n) -> str:
 
 
 def available_memory() -> int | None:
-    """MemAvailable from /proc/meminfo (what can be allocated without swapping); else total RAM."""
+    """What can be allocated without swapping: /proc/meminfo's MemAvailable (else total RAM),
+    and no more than the memory cgroup's limit leaves (containers: the OOM killer acts there)."""
+    avail = _meminfo_available()
+    free = _cgroup_free()
+    if free is not None:
+        avail = free if avail is None else min(avail, free)
+    return avail
+
+
+def _meminfo_available() -> int | None:
     try:
         with open("/proc/meminfo", encoding="ascii") as f:
             for line in f:
@@ -170,8 +179,53 @@ def available_memory() -> int | None:
         return None
 
 
+# (limit, usage, stat, reclaimable page cache key) of cgroup v2, then v1
+_CGROUPS = (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current", "/sys/fs/cgroup/memory.stat",
+             "inactive_file"),
+            ("/sys/fs/cgroup/memory/memory.limit_in_bytes", "/sys/fs/cgroup/memory/memory.usage_in_bytes",
+             "/sys/fs/cgroup/memory/memory.stat", "total_inactive_file"))
+
+
+def _cgroup_free() -> int | None:
+    """Limit minus usage of this process's memory cgroup (page cache it can drop not counted); None: no limit."""
+    for limit_path, usage_path, stat_path, cache_key in _CGROUPS:
+        try:
+            limit = Path(limit_path).read_text().strip()
+            if limit == "max" or int(limit) >= 2 ** 60:      # v1 writes "no limit" as ~2**63
+                return None
+            usage = int(Path(usage_path).read_text())
+        except (OSError, ValueError):
+            continue
+        cache = 0
+        try:
+            for line in Path(stat_path).read_text().splitlines():
+                key, _, value = line.partition(" ")
+                if key == cache_key:
+                    cache = int(value)
+        except (OSError, ValueError):
+            pass
+        return max(int(limit) - (usage - cache), 0)
+    return None
+
+
+def own_rss() -> int:
+    """Resident memory of this process now (already in use, so not in MemAvailable)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
 def limit_bytes(limit=None) -> tuple:
-    """(bytes, where the limit comes from): the argument, else $TENSORMASS_MAX_MEMORY, else the machine's."""
+    """(bytes, where the limit comes from): the argument, else $TENSORMASS_MAX_MEMORY, else the machine's.
+
+    The machine's: SAFETY_FRACTION of its available memory, plus what this process holds
+    already (the estimate counts the interpreter and libraries, MemAvailable does not).
+    """
     if limit is not None:
         return parse_size(limit), "--max-memory / max_memory"
     env = os.environ.get(ENV_MAX_MEMORY, "").strip()
@@ -180,7 +234,9 @@ def limit_bytes(limit=None) -> tuple:
     avail = available_memory()
     if avail is None:                      # nothing to compare against: do not refuse
         return None, "unknown (no /proc/meminfo, no sysconf)"
-    return int(avail * SAFETY_FRACTION), f"{SAFETY_FRACTION:.0%} of the {fmt_bytes(avail)} available"
+    rss = own_rss()
+    return (int(avail * SAFETY_FRACTION) + rss,
+            f"{SAFETY_FRACTION:.0%} of the {fmt_bytes(avail)} available, plus the {fmt_bytes(rss)} this process holds")
 
 
 # ============================================================================== counts

@@ -82,7 +82,8 @@ def test_sizes_and_limits(monkeypatch):
             parse_size(bad)
     monkeypatch.delenv(resources.ENV_MAX_MEMORY, raising=False)
     monkeypatch.setattr(resources, "available_memory", lambda: 10 * GiB)
-    assert limit_bytes(None)[0] == int(10 * GiB * resources.SAFETY_FRACTION)
+    monkeypatch.setattr(resources, "own_rss", lambda: 2 ** 28)           # already resident: not in MemAvailable
+    assert limit_bytes(None)[0] == int(10 * GiB * resources.SAFETY_FRACTION) + 2 ** 28
     monkeypatch.setenv(resources.ENV_MAX_MEMORY, "3G")
     assert limit_bytes(None) == (3 * GiB, resources.ENV_MAX_MEMORY)
     assert limit_bytes("1G")[0] == GiB                          # the argument beats the environment
@@ -91,9 +92,19 @@ def test_sizes_and_limits(monkeypatch):
         limit_bytes(None)
 
 
-def test_available_memory_reads_the_machine():
+def test_available_memory_reads_the_machine_and_its_cgroup(tmp_path, monkeypatch):
     avail = resources.available_memory()
     assert avail is None or avail > 0
+    assert resources.own_rss() > 0
+    limit, usage, stat = tmp_path / "memory.max", tmp_path / "memory.current", tmp_path / "memory.stat"
+    limit.write_text("1073741824\n")
+    usage.write_text(str(600 * 2 ** 20))
+    stat.write_text("anon 1\ninactive_file 104857600\n")
+    monkeypatch.setattr(resources, "_CGROUPS", ((str(limit), str(usage), str(stat), "inactive_file"),))
+    assert resources._cgroup_free() == GiB - 500 * 2 ** 20           # page cache it can drop is not used
+    assert resources.available_memory() <= GiB - 500 * 2 ** 20
+    limit.write_text("max\n")
+    assert resources._cgroup_free() is None
 
 
 def test_constants_mirror_the_runtime():
