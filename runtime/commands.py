@@ -317,6 +317,9 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((f"probe {name}", f"u = {_fmt_vec(u)} m, |u| = {norm:.4g} m"))
         except (TypeError, ValueError):
             rows.append((f"probe {name}", str(u)))
+    est = data.get("estimate")
+    if isinstance(est, dict) and est.get("text"):
+        rows.append(("estimate", f"{est['text']} (before the run)"))
     rows += _health_rows(data.get("health"))
     rows += _warning_rows(data.get("warnings"), json_path)
     rows += _adapt_rows(data.get("adapt"))

@@ -60,6 +60,7 @@ class Summary:
     warnings: list = field(default_factory=list)   # [{"step", "time", "kind", "message"}]
     health: dict = field(default_factory=dict)     # runtime.health.HealthMonitor.summary()
     steps_done: int = 0                   # steps finished (== steps unless the run stopped)
+    estimate: dict | None = None          # runtime.resources: memory and time estimated before allocating
 
     @property
     def exit_code(self) -> int:
@@ -323,7 +324,13 @@ class Simulation:
             stable_dt=self.stable_dt, per_step=h.to_dict(),
             adapt=None if self.adapter is None else self.adapter.summary(model),
             status=status, message=message, warnings=list(self.monitor.warnings),
-            health=self.monitor.summary(), steps_done=self._step)
+            health=self.monitor.summary(), steps_done=self._step,
+            estimate=_estimate(model))
+
+
+def _estimate(model):
+    est = getattr(model, "estimate", None)
+    return None if est is None else dict(est.to_dict(), text=est.describe())
 
 
 class _Stop(Exception):
