@@ -79,7 +79,7 @@ class Case:
     files: tuple = ()                  # ((relative path, content), ...); see _build_file
     env: tuple = ()                    # ((name, value or None), ...); "{tmp}" is the case's folder
     before: tuple = ()                 # argv of earlier runs (must exit 0) made before the snapshot;
-                                       # ("@subprocess", ...argv): run in a new Python process
+                                       # leading "@env:NAME=VALUE" items: settings for that run only
     damage: tuple = ()                 # (("corrupt", glob, how) | ("write", path, text), ...) after them
     hooks: tuple = ()                  # faults injected while main runs; see _Hooks
     may_change: tuple = ()             # globs of files that existed before and may change or go
@@ -281,8 +281,9 @@ def _write_mesh(path: Path, spec: dict) -> None:
     cells = [(t, np.asarray(rows, dtype=np.int64).reshape(len(rows), -1)) for t, rows in blocks]
     fmt = spec["format"]
     target = path if fmt != "text" else path.with_name(path.name + ".vtu")
-    meshio.write(target, meshio.Mesh(pts, cells, cell_data=cell_data),
-                 file_format={"text": "vtu"}.get(fmt, fmt))
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        meshio.write(target, meshio.Mesh(pts, cells, cell_data=cell_data),   # (gmsh: "appending zeros" notes)
+                     file_format={"text": "vtu"}.get(fmt, fmt))
     if fmt == "text":                    # a VTU file under a name meshio cannot recognise
         os.replace(target, path)
     if truncate is not None:
@@ -607,7 +608,8 @@ def _call_main(argv) -> tuple:
 def replay(case: Case, root: Path | None = None) -> Result:
     """Run one case in a fresh temporary folder (or root) and classify how it ended."""
     if root is None:
-        with tempfile.TemporaryDirectory(prefix=f"tm-adv-{case.name[:40]}-") as tmp:
+        label = re.sub(r"[^A-Za-z0-9_.-]+", "-", case.name)[:40]
+        with tempfile.TemporaryDirectory(prefix=f"tm-adv-{label}-") as tmp:
             return replay(case, Path(tmp))
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
@@ -622,13 +624,9 @@ def replay(case: Case, root: Path | None = None) -> Result:
                 _forget_kernels()
             try:
                 for argv in case.before:
-                    if argv[0] == "@subprocess":         # a library this process never mapped
-                        import subprocess
-                        done = subprocess.run([sys.executable, "-m", "tensormass.generator.cli", *argv[1:]],
-                                              capture_output=True, text=True, timeout=600)
-                        code, err, escaped = done.returncode, done.stderr, None
-                    else:
-                        code, out, err, escaped = _call_main(argv)
+                    settings = tuple(tuple(a[5:].split("=", 1)) for a in argv if a.startswith("@env:"))
+                    with _environment(settings, root):
+                        code, out, err, escaped = _call_main([a for a in argv if not a.startswith("@env:")])
                     if code != 0:
                         raise RuntimeError(f"case setup: {' '.join(argv)} ended with {code}: {err or escaped}")
                 for d in case.damage:
@@ -660,6 +658,10 @@ def _damage(root: Path, d) -> None:
     kind = d[0]
     if kind == "write":
         _build_file(root, d[1], d[2])
+        return
+    if kind == "copy":
+        import shutil
+        shutil.copytree(root / d[1], root / d[2], symlinks=True)
         return
     if kind != "corrupt":
         raise ValueError(f"unknown damage {kind!r}")
@@ -1339,16 +1341,20 @@ def _cache_cases() -> None:
                 files=((f"cache/{_generator_version()}/c", "not a folder"),))
     _cache_case("C, fresh cache", "ok")
     _cache_case("C, relative cache path", "ok", cache="rel/cache", ignore=("rel/**",))
-    compiled = (("@subprocess",) + RUN,)
+    # Compiled into build/ and copied to cache/: this process has mapped build/'s library, never
+    # cache/'s, so damaging cache/'s is what a later process meets (damaging a library this
+    # process has mapped would change its code under it).
+    compiled = (("@env:TENSORMASS_CACHE={tmp}/build",) + RUN,)
+    copied = (("copy", "build", "cache"),)
     for how, what in (("garbage", "library overwritten with garbage"), ("truncate", "library truncated"),
                       ("remove", "library removed")):
-        _cache_case(f"C, {what}", "ok", before=compiled, damage=(("corrupt", "cache/*/c/*.so", how),),
+        _cache_case(f"C, {what}", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so", how),),
                     may_change=("cache/**", "out/**", "summary.json"))
-    _cache_case("C, hash sidecar removed", "ok", before=compiled, damage=(("corrupt", "cache/*/c/*.so.sha256", "remove"),),
+    _cache_case("C, hash sidecar removed", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so.sha256", "remove"),),
                 may_change=("cache/**", "out/**", "summary.json"))
-    _cache_case("C, hash sidecar garbage", "ok", before=compiled, damage=(("corrupt", "cache/*/c/*.so.sha256", "text"),),
+    _cache_case("C, hash sidecar garbage", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so.sha256", "text"),),
                 may_change=("cache/**", "out/**", "summary.json"))
-    _cache_case("C, compiled library in a read-only cache", "ok", before=compiled, hooks=ro,
+    _cache_case("C, compiled library in a read-only cache", "ok", before=compiled, damage=copied, hooks=ro,
                 may_change=("out/**", "summary.json"))
     _cache_case("C, stale temporary file of a crashed compile", "ok", files=(("cache/x/c/.lib.so.tmp", b"\x7fELF"),))
     _cache_case("C, no compiler", err, r"no C compiler", env=(("CC", "/nonexistent/cc"),))

@@ -51,13 +51,11 @@ def count(results) -> dict:
     return c
 
 
-def table(rows: list) -> str:
-    """Markdown: one column per count, one row per (label, counts)."""
-    head = "| | " + " | ".join(label for _, label in COLUMNS) + " |"
-    rule = "|---|" + "---|" * len(COLUMNS)
-    lines = [head, rule]
-    for label, c in rows:
-        lines.append(f"| {label} | " + " | ".join(str(c[key]) for key, _ in COLUMNS) + " |")
+def table(columns: list) -> str:
+    """Markdown: one row per count, one column per (label, counts) (all cases, then each family)."""
+    lines = ["| | " + " | ".join(label for label, _ in columns) + " |", "|---|" + "---:|" * len(columns)]
+    for key, label in COLUMNS:
+        lines.append(f"| {label} | " + " | ".join(str(c[key]) for _, c in columns) + " |")
     return "\n".join(lines)
 
 
@@ -82,9 +80,7 @@ def main(argv=None) -> int:
     overall = count(results)
     per_family = [(f, count([r for r in results if r.case.family == f]))
                   for f in FAMILIES if any(r.case.family == f for r in results)]
-    print(table([("all", overall)]))
-    print()
-    print(table(per_family))
+    print(table([("all", overall)] + per_family))
     failures = [r for r in results if not r.passed]
     print(f"\n{len(results)} inputs replayed in {seconds:.1f} s; {len(failures)} missed their expectation")
     for r in failures:
