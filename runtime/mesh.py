@@ -180,6 +180,8 @@ def read_mesh(path) -> Mesh:
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"mesh file not found: {path}")
+    if path.stat().st_size == 0:
+        raise MeshError(f"mesh file {path} is empty")
     # meshio prints its reasons and may even call sys.exit(); capture both
     said = io.StringIO()
     try:
