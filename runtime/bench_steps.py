@@ -104,6 +104,20 @@ def measure(element, cells, size, law, kind, linear, steps) -> dict:
     }
 
 
+def health_overhead(element, cells, size, law, steps=30) -> dict:
+    """The health monitor's own time per implicit Euler step against the step (30 steps, direct):
+    measured by the monitor in the same run, so machine load hits both alike."""
+    from .scene import Scene
+    from .simulation import Simulation
+    scene = Scene.from_string(scene_text(element, cells, size, law, "implicit_euler", "direct", steps))
+    summary = Simulation(scene).run()
+    wall = summary.per_step["wall"]
+    later = float(np.mean(wall[1:]))
+    per = summary.time["health"] / steps
+    return {"element": element, "law": law, "elements": summary.n_elements, "steps": steps,
+            "later_step_s": later, "health_per_step_s": per, "health_fraction_of_later_step": per / later}
+
+
 def _best(call, repeats):
     """(best seconds, result of the last call)."""
     best, out = np.inf, None
@@ -272,7 +286,17 @@ def run_steps_bench(quick=False, json_path=None, progress=print, bodies=None, ne
                                  f"{1e3 * r['health_per_step_s']:.2f} ms per step = {100 * r['health_fraction']:.2f} %)"
                                  + (f"; first step {1e3 * r['first_step_s']:.1f} ms, later steps {1e3 * r['later_steps_s']:.1f} ms"
                                     if r["later_steps_s"] is not None else ""))
-    report = {"machine": machine_info(), "quick": quick, "results": results}
+    report = {"machine": machine_info(), "quick": quick, "results": results, "health": []}
+    for body, (element, cells, size) in table.items():
+        if element != "tetra" or (bodies is not None and body not in bodies):
+            continue
+        for law in LAWS:
+            h = health_overhead(element, cells, size, law, steps=10 if quick else 30)
+            report["health"].append({"body": body, **h})
+            if progress:
+                progress(f"{body:15s} {law:11s} health monitor: {1e3 * h['health_per_step_s']:.3f} ms per implicit "
+                         f"Euler step = {100 * h['health_fraction_of_later_step']:.2f} % of a later step "
+                         f"({1e3 * h['later_step_s']:.1f} ms, direct, {h['steps']} steps)")
     if newton:
         case = QUICK_NEWTON_CASE if quick else NEWTON_CASE
         report["newton_iteration"] = compare_newton(

@@ -105,6 +105,25 @@ def _min_det_2d(D, cells, U, n_points, stride, out):
         out[e] = low
 
 
+@njit(cache=True)
+def _spread(U):
+    """Largest distance of a node's displacement from the mean displacement (one pass each)."""
+    n, dim = U.shape
+    mean = np.zeros(dim)
+    for i in range(n):
+        for a in range(dim):
+            mean[a] += U[i, a]
+    mean /= max(n, 1)
+    worst = 0.0
+    for i in range(n):
+        d = 0.0
+        for a in range(dim):
+            d += (U[i, a] - mean[a]) ** 2
+        if d > worst:
+            worst = d
+    return np.sqrt(worst)
+
+
 def part_min_det_F(model, part, u: np.ndarray) -> np.ndarray | None:
     """min det F per active element of a part; None for kernels without stored shape gradients."""
     k = part.kernel
@@ -165,8 +184,9 @@ class HealthMonitor:
         self.last_min_det = np.inf
         self.H0 = None
         self.energy_scale = self._energy_scale(ctx, duration) if self.enabled else None
-        if self.enabled:                   # compile / load the det F loops now: setup, not the first step
+        if self.enabled:                   # compile / load the numba loops now: setup, not the first step
             min_det_F(model, np.zeros(model.n_dofs))
+            _spread(np.zeros((1, model.dim)))
 
     # -- reference energy -------------------------------------------------------------------------
     def _energy_scale(self, ctx, duration) -> float:
@@ -245,8 +265,7 @@ class HealthMonitor:
         values = [v for v in energies.values() if v is not None]
         if not (np.all(np.isfinite(ctx.u)) and np.all(np.isfinite(ctx.v)) and np.all(np.isfinite(values))):
             return Check(stop=f"step {step}: the state or its energy is not finite (NaN/Inf): the solution diverged")
-        U = ctx.u.reshape(model.n_points, model.dim)
-        rel = float(np.sqrt(np.max(np.sum((U - U.mean(axis=0)) ** 2, axis=1)))) / model.size
+        rel = float(_spread(ctx.u.reshape(model.n_points, model.dim))) / model.size
         self.max_rel_u = max(self.max_rel_u, rel)
         if rel > self.max_displacement:
             return Check(stop=f"step {step}: a node moved {rel:.3g} body sizes ({rel * model.size:.3g} m) relative to "
