@@ -8,6 +8,10 @@ class TensormassError(ValueError):
     """Base class: bad input that the user can fix (exit code 2 on the command line)."""
 
 
+class SceneError(TensormassError):
+    """A scene file that cannot be used; the message names the key."""
+
+
 class ElementError(TensormassError):
     """A problem with specific elements; ``elements`` holds their ids (0-based)."""
 

@@ -21,7 +21,7 @@ from .errors import InvertedElementError, TensormassError
 from .health import safe_norm
 from .solvers import ConstrainedSystem, LinearSolver
 
-__all__ = ["Context", "make_integrator", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
+__all__ = ["Context", "make_integrator", "integrator_class", "outputs_for", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
            "newton", "stable_time_step"]
 
 # Line search: Armijo constant, halvings, and the relative round-off allowance on energies.
@@ -230,6 +230,9 @@ def _line_search(potential, u, d, g, Pi0, mag0, slope, moving):
 
 class _Integrator:
     kind = ""
+    # The kernel outputs this integrator calls (the model loads and compiles exactly these); energy
+    # serves the line search, the health monitor's energy balance and reports.
+    outputs: tuple = ()
 
     def __init__(self, ctx: Context):
         self.ctx, self.model = ctx, ctx.model
@@ -244,6 +247,7 @@ class _Integrator:
 class Static(_Integrator):
     """Load stepping with Newton + line search on Pi(u) = W(u) - lambda f_ext.u."""
     kind = "static"
+    outputs = ("energy", "forces", "stiffness")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -306,6 +310,7 @@ class ImplicitEuler(_Dynamic):
     (M + h D + h^2 K) dv = h (f(x, v) - h K v),  f = f_int + f_ext - D v,  D = alpha M + beta K.
     """
     kind = "implicit_euler"
+    outputs = ("energy", "forces", "stiffness")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -329,6 +334,7 @@ class ImplicitEuler(_Dynamic):
 class BackwardEuler(_Dynamic):
     """Fully implicit Euler: Newton on the incremental potential (see _IncrementalPotential)."""
     kind = "backward_euler"
+    outputs = ("energy", "forces", "stiffness")
 
     def single(self, u, v, t, h):
         ctx = self.ctx
@@ -344,6 +350,7 @@ class BackwardEuler(_Dynamic):
 class Explicit(_Dynamic):
     """Symplectic Euler: v += h M^-1 f(x, v); x += h v.  Stops when it detects instability."""
     kind = "explicit"
+    outputs = ("forces", "energy")            # energy every few steps only (health monitor, reports)
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -444,9 +451,18 @@ _KINDS = {"static": Static, "implicit_euler": ImplicitEuler, "backward_euler": B
           "explicit": Explicit}
 
 
-def make_integrator(ctx: Context):
-    kind = ctx.model.solver.kind
+def integrator_class(kind: str) -> type:
+    """The integrator of a solver kind (a TensormassError naming the known kinds otherwise)."""
     try:
-        return _KINDS[kind](ctx)
+        return _KINDS[kind]
     except KeyError:
         raise TensormassError(f"unknown solver kind {kind!r}; known: {', '.join(_KINDS)}") from None
+
+
+def outputs_for(kind: str) -> tuple:
+    """The kernel outputs a solver kind needs: its integrator's declared `outputs`."""
+    return integrator_class(kind).outputs
+
+
+def make_integrator(ctx: Context):
+    return integrator_class(ctx.model.solver.kind)(ctx)

@@ -5,14 +5,14 @@
 
 Dofs are node-major: dof = node * dim + component.  Everything here is built
 once; the integrators only read it.  Only the kernels a scene needs are loaded
-(`Model.required_kernels`), and only the outputs its solver calls are compiled
-(`Model.warm_up`).
+(`Model.required_kernels`), and only the outputs its integrator declares
+(`runtime.integrators`, e.g. `Static.outputs`) are compiled (`Model.warm_up`).
+Which material models each cell and which nodes a box holds come from runtime.regions.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -20,29 +20,16 @@ from .. import laws
 from . import kernels as _kernels
 from . import resources
 from .errors import ElementError, TensormassError
-from .mesh import NODES_PER_CELL, Mesh, boundary_faces, check_mesh, generate_bar, read_mesh
-from .scene import Loads, Output, Solver, reachable_laws, switch_parameters
+from .integrators import outputs_for
+from .mesh import Mesh, boundary_faces, check_mesh
+from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
+                      prescribed_values, reachable_laws, switch_parameters)
+from .scene import Loads, Output, Solver
+from .scene_mesh import build_mesh, scene_mesh
 
+# outputs_for (runtime.integrators), build_mesh and scene_mesh (runtime.scene_mesh) are kept
+# importable from here.
 __all__ = ["Model", "Part", "LawGroup", "outputs_for", "build_mesh", "scene_mesh", "assign_materials"]
-
-# Kernel outputs each solver kind calls; energy serves the line search, the health monitor's
-# energy balance and reports (explicit runs evaluate it every few steps only).
-_OUTPUTS = {
-    "explicit": ("forces", "energy"),
-    "implicit_euler": ("energy", "forces", "stiffness"),
-    "backward_euler": ("energy", "forces", "stiffness"),
-    "static": ("energy", "forces", "stiffness"),
-}
-# Relative tolerance for "inside a box" (times the mesh diagonal): nodes on a face count.
-_BOX_TOL = 1e-8
-
-
-def outputs_for(kind: str) -> tuple:
-    """The kernel outputs a solver kind needs."""
-    try:
-        return _OUTPUTS[kind]
-    except KeyError:
-        raise TensormassError(f"unknown solver kind {kind!r}; known: {', '.join(_OUTPUTS)}") from None
 
 
 @dataclass
@@ -120,102 +107,13 @@ class LawGroup:
 # --------------------------------------------------------------------------- mesh and materials
 
 
-def scene_mesh(scene) -> Mesh:
-    """The scene's mesh (its cached load_mesh() when it has one), checked."""
-    if hasattr(scene, "load_mesh"):
-        mesh = scene.load_mesh()
-        check_mesh(mesh)
-        return mesh
-    return build_mesh(scene.mesh)
-
-
-def build_mesh(spec) -> Mesh:
-    """Generate or read the mesh of a MeshSpec and check it."""
-    if spec.file:
-        mesh = read_mesh(spec.file)
-    elif spec.generate in (None, "bar"):
-        dim = 2 if spec.element in ("triangle", "triangle6", "quad") or len(spec.cells) == 2 else 3
-        bar = SimpleNamespace(size=tuple(spec.size)[:dim], cells=tuple(spec.cells)[:dim], element=spec.element)
-        resources.check(resources.estimate(resources.MeshCounts.of_bar(bar)), what="the generated bar")
-        mesh = generate_bar(tuple(spec.size)[:dim], tuple(spec.cells)[:dim], spec.element,
-                            tuple(spec.origin)[:dim])
-    else:
-        raise TensormassError(f"mesh.generate: unknown generator {spec.generate!r} (known: bar)")
-    check_mesh(mesh)
-    return mesh
-
-
-def _box(box, dim: int, tol: float):
-    """(lo, hi) of a box given as two corners, widened by tol."""
-    try:
-        a, b = (np.asarray(c, dtype=float).reshape(-1) for c in box)
-    except (TypeError, ValueError):
-        raise TensormassError(f"a box must be two corner points, got {box!r}") from None
-    if a.size < dim or b.size < dim:
-        raise TensormassError(f"box corners need {dim} coordinates, got {box!r}")
-    a, b = a[:dim], b[:dim]
-    return np.minimum(a, b) - tol, np.maximum(a, b) + tol
-
-
-def _in_box(points: np.ndarray, box, tol: float) -> np.ndarray:
-    lo, hi = _box(box, points.shape[1], tol)
-    return np.all((points >= lo) & (points <= hi), axis=1)
-
-
-def _region_mask(block, region) -> np.ndarray:
-    """Cells of a block that a material's region selects."""
-    n = len(block)
-    if isinstance(region, str) and region.lstrip("-").isdigit():
-        region = int(region)
-    if region == "all":
-        return np.ones(n, bool)
-    if isinstance(region, (int, np.integer)) and not isinstance(region, bool):
-        return np.zeros(n, bool) if block.tags is None else block.tags == region
-    if isinstance(region, str) and region in NODES_PER_CELL:
-        return np.full(n, block.type == region)
-    raise TensormassError(f"material region {region!r}: use 'all', an element type "
-                          f"({', '.join(NODES_PER_CELL)}) or an integer cell tag")
-
-
 def _size(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 1.0
 
 
 def assign_materials(mesh: Mesh, materials) -> list:
-    """Per block, the index of the first matching material of every cell."""
-    if not materials:
-        raise TensormassError("the scene defines no material")
-    tol = _BOX_TOL * _size(mesh.points)
-    out, missing, first_missing = [], 0, []
-    offset = 0
-    for block in mesh.blocks:
-        index = np.full(len(block), -1, dtype=np.int64)
-        centroid = mesh.points[block.cells].mean(axis=1)
-        for i, mat in enumerate(materials):
-            hit = _region_mask(block, mat.region) & (index < 0)
-            if mat.box is not None:
-                hit &= _in_box(centroid, mat.box, tol)
-            index[hit] = i
-        lost = np.flatnonzero(index < 0)
-        missing += lost.size
-        first_missing.extend((offset + lost[:5]).tolist())
-        offset += len(block)
-        out.append(index)
-    if missing:
-        raise TensormassError(f"{missing} cell(s) match no material (e.g. cells {first_missing[:5]}); "
-                              "add a material with region = 'all' or widen the regions")
-    return out
-
-
-def _groups(mesh: Mesh, materials, index) -> dict:
-    """(element, law, quadrature) -> list of (block, local cell ids), in order of appearance."""
-    groups: dict = {}
-    for b, (block, idx) in enumerate(zip(mesh.blocks, index)):
-        for i in np.unique(idx):
-            mat = materials[i]
-            key = (block.type, mat.law, mat.quadrature)
-            groups.setdefault(key, []).append((b, np.flatnonzero(idx == i), int(i)))
-    return groups
+    """Per block, the index of the first matching material of every cell; cells without one are refused."""
+    return _assign(mesh, materials, complete=True)
 
 
 # --------------------------------------------------------------------------- the model
@@ -245,6 +143,7 @@ class Model:
         self.dim, self.n_points = mesh.dim, mesh.n_points
         self.n_dofs = self.n_points * self.dim
         self.size = _size(mesh.points)
+        self.box_tol = box_tolerance(mesh.points)
         self.outputs = outputs_for(self.solver.kind)
         self.adapt = adapt
         self.groups: list = []                     # LawGroup per set of switchable cells
@@ -294,7 +193,7 @@ class Model:
         index = assign_materials(mesh, scene.materials)
         outputs = outputs_for(scene.solver.kind)
         keys = set()
-        for (element, law, quad) in _groups(mesh, scene.materials, index):
+        for (element, law, quad) in material_groups(mesh, scene.materials, index):
             for reach in reachable_laws(law, getattr(scene, "adapt", ())):
                 keys.add((element, reach, quad, outputs))
         return keys
@@ -304,7 +203,7 @@ class Model:
         index = assign_materials(self.mesh, self.materials)
         offsets = np.concatenate([[0], np.cumsum([len(b) for b in self.mesh.blocks])])
         parts = []
-        for (element, law, quad), members in _groups(self.mesh, self.materials, index).items():
+        for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
             cells = np.vstack([self.mesh.blocks[b].cells[ids] for b, ids, _ in members])
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
             dofs = (cells[:, :, None] * self.dim + np.arange(self.dim)).reshape(len(cells), -1)
@@ -360,7 +259,7 @@ class Model:
         return np.repeat(node_mass, self.dim)
 
     def _nodes_in(self, box, what: str) -> np.ndarray:
-        nodes = np.flatnonzero(_in_box(self.mesh.points, box, _BOX_TOL * self.size))
+        nodes = np.flatnonzero(box_contains(box, self.mesh.points, self.box_tol))
         if nodes.size == 0:
             raise TensormassError(f"{what}: no node inside box {box!r}")
         return nodes
@@ -373,19 +272,15 @@ class Model:
 
     def _constraints(self, fixed) -> tuple:
         """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
-        target = np.full(self.n_dofs, np.nan)
-        owner = np.full(self.n_dofs, -1, dtype=np.int64)
         for i, fx in enumerate(fixed):
-            nodes = self._nodes_in(fx.box, f"fixed[{i}]")
+            self._nodes_in(fx.box, f"fixed[{i}]")
             comps = np.arange(self.dim) if fx.components is None else np.asarray(fx.components, dtype=int)
             if comps.size == 0 or comps.min() < 0 or comps.max() >= self.dim:
                 raise TensormassError(f"fixed[{i}].components must be in 0..{self.dim - 1}, got {fx.components!r}")
-            disp = (np.zeros(self.dim) if fx.displacement is None
-                    else self._vector(fx.displacement, f"fixed[{i}].displacement"))
-            dofs = (nodes[:, None] * self.dim + comps).ravel()
-            values = np.tile(disp[comps], nodes.size)
-            self._refuse_conflict(target, owner, dofs, values, i)
-            target[dofs], owner[dofs] = values, i
+            if fx.displacement is not None:
+                self._vector(fx.displacement, f"fixed[{i}].displacement")
+        # entries that give one dof different values are refused there (the order would decide)
+        target = prescribed_values(fixed, self.mesh.points, self.box_tol)[0].ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
         used = np.zeros(self.n_points, bool)
@@ -395,15 +290,6 @@ class Model:
         target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
         dofs = np.flatnonzero(~np.isnan(target))
         return dofs, target[dofs]
-
-    def _refuse_conflict(self, target, owner, dofs, values, i) -> None:
-        """Two [[fixed]] entries giving one dof different values: refused (the order would decide)."""
-        clash = np.flatnonzero(~np.isnan(target[dofs]) & (target[dofs] != values))
-        if clash.size:
-            dof = int(dofs[clash[0]])
-            raise TensormassError(f"fixed[{i}]: prescribes component {dof % self.dim} = {values[clash[0]]:g} at node "
-                                  f"{dof // self.dim} where fixed[{int(owner[dof])}] prescribes {target[dof]:g}; "
-                                  "overlapping boxes need the same values")
 
     def _external_forces(self) -> np.ndarray:
         f = (self.mass.reshape(-1, self.dim) * self._vector(self.loads.gravity, "loads.gravity")).ravel()
@@ -420,7 +306,7 @@ class Model:
 
     def _add_traction(self, f, box, traction, i):
         """Traction per unit area on boundary faces inside the box, area-split equally over face nodes."""
-        inside = _in_box(self.mesh.points, box, _BOX_TOL * self.size)
+        inside = box_contains(box, self.mesh.points, self.box_tol)
         hit = False
         for _, _, nodes in boundary_faces(self.mesh):
             nodes = np.asarray(nodes)

@@ -52,8 +52,14 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
+
+from .. import generated
 from .errors import TensormassError
+from .mesh import bar_counts
+from .regions import may_cover, reachable_laws
 
 __all__ = ["ResourceError", "MeshCounts", "Estimate", "estimate", "check", "limit_bytes", "parse_size",
            "fmt_bytes", "ENV_MAX_MEMORY", "SAFETY_FRACTION"]
@@ -116,8 +122,15 @@ BAND_SECONDS = 3e-11
 CG_SECONDS = 1.5e-9
 CG_DYNAMIC_ITERATIONS = 100
 NEWTON_ITERATIONS = {"static": 4, "implicit_euler": 2, "backward_euler": 2, "explicit": 1}
-# Kernel outputs each solver calls per iteration (model._OUTPUTS; explicit also evaluates energy).
+# The kernel output each solver calls per iteration: "stiffness" among an integrator's declared
+# outputs (runtime.integrators, not imported: it loads numba) means forces_and_stiffness; a test
+# checks this table against the declarations.
 _STEP_OUTPUT = {"explicit": "forces"}
+
+# What estimate() assumes when no materials or solver are given: the defaults of a scene's
+# Material and Solver (runtime.scene imports this module, so not imported; a test checks they agree).
+DEFAULT_MATERIAL = SimpleNamespace(region="all", box=None, law="stvk", quadrature="gauss2")
+DEFAULT_SOLVER = SimpleNamespace(kind="static", steps=1, linear="auto", cg_max_iterations=1000, project_psd=None)
 
 _UNITS = {"": 1, "B": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40, "P": 2 ** 50}
 
@@ -260,7 +273,6 @@ class MeshCounts:
     @classmethod
     def of_bar(cls, spec) -> "MeshCounts":
         """From a generated bar's MeshSpec (size, cells, element), without generating it."""
-        from .mesh import bar_counts
         cells, nodes = bar_counts(spec.cells, spec.element)
         longest = max(range(len(spec.size)), key=lambda a: spec.size[a])
         return cls(len(spec.cells), nodes, cells, float(spec.cells[longest]))
@@ -268,7 +280,6 @@ class MeshCounts:
 
 def _layers(points, cells: dict, dim: int) -> float:
     """Cell layers along the bounding box's longest side, for cells of the box's mean size."""
-    import numpy as np
     if len(points) < 2:
         return 1.0
     extent = np.ptp(points, axis=0)
@@ -286,7 +297,6 @@ def _layers(points, cells: dict, dim: int) -> float:
 @lru_cache(maxsize=1)
 def _manifest() -> dict:
     """generated/manifest.json entries by (element, law, quadrature)."""
-    from .. import generated
     path = Path(generated.__file__).resolve().parent / "manifest.json"
     try:
         entries = json.loads(path.read_text(encoding="utf-8"))["entries"]
@@ -307,14 +317,7 @@ def _entry(element, law, quadrature) -> dict:
     return max(same, key=lambda e: e["constants"])
 
 
-def _applies(material, cell_type: str) -> bool:
-    """Whether a material may cover cells of this type (tags and boxes: maybe, so yes)."""
-    region = getattr(material, "region", "all")
-    return not isinstance(region, str) or region in ("all", cell_type)
-
-
 def _laws(material, adapt) -> list:
-    from .scene import reachable_laws
     return reachable_laws(material.law, [r for r in adapt if r.action == "switch_law"])
 
 
@@ -322,7 +325,7 @@ def _per_type(cell_type, materials, adapt, output) -> tuple:
     """(constants per cell, kernel operations per cell and iteration, kernels) for the costliest material."""
     worst, kernels = (0, 0), set()
     for m in materials:
-        if not _applies(m, cell_type):
+        if not may_cover(m, cell_type):
             continue
         laws = _laws(m, adapt)
         constants = sum(_entry(cell_type, law, m.quadrature)["constants"] for law in laws)
@@ -392,10 +395,8 @@ def estimate(scene_or_counts, *, materials=None, solver=None, adapt=None, refine
         materials = scene.materials if materials is None else materials
         solver = scene.solver if solver is None else solver
         adapt = getattr(scene, "adapt", ()) if adapt is None else adapt
-    if materials is None or solver is None:
-        from .scene import Material, Solver
-        materials = materials if materials is not None else [Material()]
-        solver = solver if solver is not None else Solver()
+    materials = materials if materials is not None else [DEFAULT_MATERIAL]
+    solver = solver if solver is not None else DEFAULT_SOLVER
     adapt = list(adapt or ())
     if refinement:
         counts = _refined(counts, adapt)

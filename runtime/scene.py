@@ -9,6 +9,10 @@ like raise SceneError naming the key (arrays of tables are indexed from 0:
     mesh = scene.load_mesh()                # the same (cached) Mesh
     which = scene.assign_materials(mesh)    # per block: index of the material of each cell
 
+This module is the schema and its parser (values are checked here; E and nu by laws, once).
+What needs the mesh lives elsewhere: building/reading it and checking the scene against it in
+runtime.scene_mesh, boxes, regions and the material of each cell in runtime.regions.
+
 Schema (every table but [mesh] and [[material]] is optional)::
 
     name = "beam"                           # default: the file name without .toml
@@ -57,13 +61,19 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
+from .. import laws
+from ..generator.catalogue import entries
+from .errors import SceneError
+from .mesh import COORD_MAX
+from .regions import (assign_materials as _assign_materials, box_contains, box_tolerance, prescribed_values,
+                      reachable_laws, switch_applies, switch_parameters)
+from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, check_against_mesh
+from .scene_mesh import load_mesh as _load_mesh
 
-from .errors import TensormassError
-
-
-class SceneError(TensormassError):
-    """A scene file that cannot be used; the message names the key."""
+# Names that lived here before runtime.regions and runtime.scene_mesh (kept for importers).
+__all__ = ["Scene", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "Loads", "Solver", "Probe",
+           "Output", "Adapt", "box_contains", "box_tolerance", "prescribed_values", "reachable_laws",
+           "switch_applies", "switch_parameters", "PROBE_TOLERANCE", "MAX_STEPS"]
 
 
 @dataclass
@@ -89,8 +99,7 @@ class Material:
     density: float = 1000.0
 
     def native_parameters(self) -> dict:
-        """The law's native parameters as floats (from E, nu or as given)."""
-        from .. import laws
+        """The law's native parameters as floats (from E, nu or as given; laws validates E and nu)."""
         law = laws.get(self.law)
         native = law.native_parameters(self.E, self.nu, **self.params)
         return {k: float(v) for k, v in native.items()}
@@ -244,35 +253,8 @@ class Scene:
         return None
 
     def load_mesh(self):
-        """The mesh (generated or read once, then cached); MeshError-based problems become SceneError.
-
-        The run's memory is estimated and checked against the limit (max_memory) first: for
-        a generated bar before it is built, for a file right after it is read (ResourceError).
-        """
-        mesh = getattr(self, "_mesh", None)
-        if mesh is None:
-            from .mesh import MeshError, check_coordinates, generate_bar, read_mesh
-            from .resources import MeshCounts
-            key = "mesh.file" if self.mesh.file is not None else "mesh"
-            try:
-                if self.mesh.file is not None:
-                    mesh = read_mesh(self.mesh.file)
-                    check_coordinates(mesh.points)
-                    self._check_resources(MeshCounts.of_mesh(mesh))
-                else:
-                    self._check_resources(MeshCounts.of_bar(self.mesh))
-                    mesh = generate_bar(self.mesh.size, self.mesh.cells, self.mesh.element, self.mesh.origin)
-                    check_coordinates(mesh.points)
-            except MeshError as exc:
-                raise SceneError(f"{key}: {exc}") from None
-            self._mesh = mesh
-        return mesh
-
-    def _check_resources(self, counts) -> None:
-        from . import resources
-        est = resources.estimate(counts, materials=self.materials, solver=self.solver, adapt=self.adapt)
-        resources.check(est, self.max_memory, what=f"scene {self.name!r}")
-        self._estimate = est
+        """The mesh (generated or read once, then cached; see runtime.scene_mesh.load_mesh)."""
+        return _load_mesh(self)
 
     @property
     def estimate(self):
@@ -281,63 +263,16 @@ class Scene:
 
     def assign_materials(self, mesh=None) -> list:
         """Per cell block, the index into self.materials of each cell (-1: no material matches)."""
-        mesh = self.load_mesh() if mesh is None else mesh
-        tol = box_tolerance(mesh.points)
-        out = []
-        for blk in mesh.blocks:
-            which = np.full(len(blk), -1, dtype=np.int64)
-            centroids = _centroids(mesh, blk)
-            for i, mat in enumerate(self.materials):
-                which[(which < 0) & _material_mask(mat, blk, centroids, tol)] = i
-            out.append(which)
-        return out
+        return _assign_materials(self.load_mesh() if mesh is None else mesh, self.materials)
 
     def validate(self, mesh=None) -> None:
-        """Checks that need the mesh (run by from_dict unless load_mesh=False)."""
-        mesh = self.load_mesh() if mesh is None else mesh
-        _check_against_mesh(self, mesh)
+        """Checks that need the mesh (run by from_dict unless load_mesh=False; runtime.scene_mesh)."""
+        check_against_mesh(self, self.load_mesh() if mesh is None else mesh)
 
     # -- writing --------------------------------------------------------------------------------
     def to_dict(self) -> dict:
         """Plain data (for summaries); not guaranteed to round-trip through from_dict."""
         return asdict(self)
-
-
-def _centroids(mesh, blk) -> np.ndarray:
-    return mesh.points[blk.cells].mean(axis=1) if len(blk) else np.zeros((0, mesh.dim))
-
-
-def _material_mask(mat: Material, blk, centroids, tol: float) -> np.ndarray:
-    """Cells of a block that a material's region (and box) select, ignoring earlier materials."""
-    if isinstance(mat.region, str) and mat.region not in ("all", blk.type):
-        return np.zeros(len(blk), dtype=bool)
-    hit = np.ones(len(blk), dtype=bool)
-    if not isinstance(mat.region, str):
-        if blk.tags is None:
-            return np.zeros(len(blk), dtype=bool)
-        hit &= blk.tags == int(mat.region)
-    if mat.box is not None:
-        hit &= box_contains(mat.box, centroids, tol)
-    return hit
-
-
-# ============================================================================== box helpers
-
-
-def box_tolerance(points) -> float:
-    """Slack for box tests: 1e-8 of the bounding-box diagonal (as runtime.model uses)."""
-    points = np.asarray(points, dtype=float)
-    if points.size == 0:
-        return 0.0
-    return 1e-8 * float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
-
-
-def box_contains(box, points, tol: float = 0.0) -> np.ndarray:
-    """Boolean mask of the points (n, dim) inside the closed box ((lo...), (hi...)), +- tol."""
-    points = np.asarray(points, dtype=float)
-    lo = np.asarray(box[0], dtype=float)
-    hi = np.asarray(box[1], dtype=float)
-    return np.all((points >= lo - tol) & (points <= hi + tol), axis=1)
 
 
 # ============================================================================== parsing
@@ -364,10 +299,6 @@ SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
 # before the run rather than discovered hours into it.
 MAX_STEPS = 100_000_000
 _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days on a real mesh"
-# A probe reports the displacement of its nearest node: farther than this share of the
-# body's size (bounding box diagonal) from every node, and farther than the largest cell,
-# it is not on the body.
-PROBE_TOLERANCE = 0.1
 LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
 BACKENDS = ("numba", "c")
@@ -571,7 +502,6 @@ class _Parser:
         return MeshSpec(generate="bar", file=None, size=size, cells=cells, element=element, origin=origin)
 
     def material(self, t, key) -> Material:
-        from .. import laws
         t = self.table(t, key)
         law_name = self.string(t.get("law", "stvk"), f"{key}.law")
         try:
@@ -612,19 +542,12 @@ class _Parser:
                 raise SceneError(f"{key}.{missing}: missing (E and nu go together)")
             E = self.number(t["E"], f"{key}.E")
             nu = self.number(t["nu"], f"{key}.nu")
-            if E <= 0:
-                raise SceneError(f"{key}.E: Young's modulus must be > 0 (got {_fmt(E)})")
-            if nu >= 0.5:
-                raise SceneError(f"{key}.nu: Poisson's ratio must be < 0.5 (got {_fmt(nu)}); nu = 0.5 is "
-                                 "incompressible, which these displacement elements cannot represent")
-            if nu <= -1.0:
-                raise SceneError(f"{key}.nu: Poisson's ratio must be > -1 (got {_fmt(nu)})")
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
                        params=native, density=density)
-        try:
+        try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:
-            raise SceneError(f"{key}: {exc}") from None
+            raise SceneError(_law_error(key, E, nu, exc)) from None
         bad = [p for p, v in values.items() if not math.isfinite(v)]
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
@@ -633,7 +556,6 @@ class _Parser:
     @staticmethod
     def _check_combination(key, region, law, quadrature):
         """Early check of (element, law, quadrature); validate() repeats it per cell type of the mesh."""
-        from ..generator.catalogue import entries
         if isinstance(region, str) and region != "all":
             _catalogue_check(f"{key}.quadrature", region, law, quadrature)
             return
@@ -727,7 +649,6 @@ class _Parser:
         return Probe(name=name, point=self.vector(t["point"], f"{key}.point"))
 
     def adapt(self, t, key) -> Adapt:
-        from .. import laws
         t = self.table(t, key)
         self.keys(t, key, _ADAPT)
         for k in ("criterion", "threshold"):
@@ -784,7 +705,6 @@ class _Parser:
 
 def _check_bar_extent(size, origin) -> None:
     """A generated bar's coordinates must stay where float64 computes volumes and energies."""
-    from .mesh import COORD_MAX
     for i, (s, o) in enumerate(zip(size, origin)):
         far = max(abs(o), abs(o + s))
         if not far <= COORD_MAX:
@@ -794,18 +714,16 @@ def _check_bar_extent(size, origin) -> None:
                              "(a unit mix-up? coordinates are in meters)")
 
 
-def _catalogue_check(key, element, law, quadrature):
-    """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
-    from ..generator.catalogue import entries, quadratures
-    try:
-        entries(elements=[element], law_names=[law], quadrature_names=[quadrature])
-    except ValueError:
-        try:
-            available = ", ".join(quadratures(element, law))
-        except Exception:  # noqa: BLE001 - only for the message
-            available = "?"
-        raise SceneError(f"{key}: quadrature {quadrature!r} is not available for {element} with law "
-                         f"{law!r}; available: {available}") from None
+def _law_error(key, E, nu, exc) -> str:
+    """The scene's message for a LawError of a material: the key of E or nu when laws refused them."""
+    if E is not None and not E > 0:
+        return f"{key}.E: Young's modulus must be > 0 (got {_fmt(E)})"
+    if nu is not None and nu >= 0.5:
+        return (f"{key}.nu: Poisson's ratio must be < 0.5 (got {_fmt(nu)}); nu = 0.5 is "
+                "incompressible, which these displacement elements cannot represent")
+    if nu is not None and nu <= -1.0:
+        return f"{key}.nu: Poisson's ratio must be > -1 (got {_fmt(nu)})"
+    return f"{key}: {exc}"
 
 
 def _check_native(key, law, native, dim):
@@ -824,211 +742,3 @@ def _check_native(key, law, native, dim):
         raise SceneError(f"{key}.kappa: bulk modulus must be > 0 (got {_fmt(kappa)})")
     if "C10" in native and "C01" in native and native["C10"] + native["C01"] <= 0:
         raise SceneError(f"{key}.C10: C10 + C01 must be > 0 (got {_fmt(native['C10'] + native['C01'])})")
-
-
-def _check_against_mesh(scene: Scene, mesh) -> None:
-    from .mesh import MeshError, check_coordinates
-    try:                                  # NaN would make every box test below fail
-        check_coordinates(mesh.points)
-    except MeshError as exc:
-        raise SceneError(f"{'mesh.file' if scene.mesh.file is not None else 'mesh'}: {exc}") from None
-    dim = mesh.dim
-
-    def vec(value, key):
-        if value is not None and len(value) != dim:
-            raise SceneError(f"{key}: expected {dim} components, got {len(value)} (the mesh is {dim}D)")
-
-    # vectors of file meshes could not be checked while parsing
-    g = scene.loads.gravity
-    if len(g) != dim:
-        if not any(g) and scene.mesh.file is not None:
-            scene.loads.gravity = (0.0,) * dim
-        else:
-            vec(g, "loads.gravity")
-    tol = box_tolerance(mesh.points)
-    lo, hi = (mesh.points.min(axis=0), mesh.points.max(axis=0)) if mesh.n_points else (None, None)
-    bounds = "" if lo is None else (f" (mesh bounds [{', '.join(f'{v:g}' for v in lo)}] .. "
-                                    f"[{', '.join(f'{v:g}' for v in hi)}])")
-    for i, m in enumerate(scene.materials):
-        if m.box is not None:
-            vec(m.box[0], f"material[{i}].box")
-    for i, f in enumerate(scene.fixed):
-        vec(f.box[0], f"fixed[{i}].box")
-        vec(f.displacement, f"fixed[{i}].displacement")
-        if f.components is not None and max(f.components) >= dim:
-            raise SceneError(f"fixed[{i}].components: component {max(f.components)} does not exist in {dim}D")
-        if not box_contains(f.box, mesh.points, tol).any():
-            raise SceneError(f"fixed[{i}].box: no mesh node inside{bounds}")
-    counters = {"force": 0, "traction": 0}
-    for load in scene.loads.nodal:
-        key = f"loads.{load.kind}[{counters[load.kind]}]"
-        counters[load.kind] += 1
-        vec(load.box[0], f"{key}.box")
-        vec(load.force, f"{key}.value")
-        if not box_contains(load.box, mesh.points, tol).any():
-            raise SceneError(f"{key}.box: no mesh node inside{bounds}")
-    for i, p in enumerate(scene.probes):
-        vec(p.point, f"probe[{i}].point")
-    prescribed_values(scene.fixed, mesh.points, tol)
-    _check_probes(scene, mesh)
-
-    # every cell needs a material, and every (cell type, law, quadrature) in use must exist
-    which = scene.assign_materials(mesh)
-    offset = 0
-    for blk, w in zip(mesh.blocks, which):
-        orphans = np.flatnonzero(w < 0)
-        if orphans.size:
-            ids = ", ".join(str(int(offset + c)) for c in orphans[:8]) + (", ..." if orphans.size > 8 else "")
-            tag = "" if blk.tags is None else f" (tag {int(blk.tags[orphans[0]])})"
-            raise SceneError(f"material: {orphans.size} {blk.type} cell(s){tag} match no [[material]]: "
-                             f"cells [{ids}]; add a last [[material]] with region = \"all\"")
-        for i in np.unique(w):
-            m = scene.materials[int(i)]
-            _catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
-        offset += len(blk)
-    _check_unused_materials(scene, mesh, which)
-    _check_adapt(scene, mesh, which)
-
-
-def prescribed_values(fixed, points, tol: float):
-    """(value, owner) per node and component: the prescribed displacement (NaN: free) and the
-    index of the [[fixed]] entry that prescribes it.
-
-    Two entries prescribing different values for the same dof are refused (SceneError
-    naming both and a node): which one wins would otherwise depend on their order.
-    """
-    n, dim = points.shape
-    value = np.full((n, dim), np.nan)
-    owner = np.full((n, dim), -1, dtype=np.int64)
-    for i, f in enumerate(fixed):
-        nodes = np.flatnonzero(box_contains(f.box, points, tol))
-        disp = np.zeros(dim) if f.displacement is None else np.asarray(f.displacement, dtype=float)[:dim]
-        for c in range(dim) if f.components is None else f.components:
-            old = value[nodes, c]
-            clash = np.flatnonzero(~np.isnan(old) & (old != disp[c]))
-            if clash.size:
-                node = int(nodes[clash[0]])
-                j = int(owner[node, c])
-                where = ", ".join(f"{float(x):g}" for x in points[node])
-                raise SceneError(f"fixed[{i}]: prescribes component {c} = {disp[c]:g} at node {node} ([{where}]) "
-                                 f"where fixed[{j}] prescribes {old[clash[0]]:g} ({clash.size} node(s) in "
-                                 "both boxes); the boxes overlap with different values: narrow one box, or "
-                                 "use components = [...] so that each component is prescribed once")
-            value[nodes, c] = disp[c]
-            owner[nodes, c] = i
-    return value, owner
-
-
-def _check_probes(scene: Scene, mesh) -> None:
-    """A probe reports its nearest node: refuse probes that are not on the body."""
-    if not scene.probes or not mesh.n_points:
-        return
-    size = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
-    cell = None                           # largest cell diagonal, computed only when needed
-    for i, p in enumerate(scene.probes):
-        d2 = np.sum((mesh.points - np.asarray(p.point, dtype=float)) ** 2, axis=1)
-        node = int(np.argmin(d2))
-        dist = math.sqrt(float(d2[node]))
-        if dist <= PROBE_TOLERANCE * size:
-            continue
-        cell = _largest_cell(mesh) if cell is None else cell
-        if dist <= cell:                  # inside a coarse cell: its nodes are all that far
-            continue
-        at = ", ".join(f"{float(x):g}" for x in mesh.points[node])
-        raise SceneError(f"probe[{i}].point: probe {p.name!r} at {list(p.point)} is {dist:.3g} m from the nearest "
-                         f"mesh node (node {node} at [{at}]), more than {PROBE_TOLERANCE:.0%} of the body's size "
-                         f"({size:.3g} m) and than its largest cell ({cell:.3g} m): it is not on the body, and "
-                         "a probe reports the displacement of its nearest node")
-
-
-def _largest_cell(mesh) -> float:
-    """Largest bounding-box diagonal of a cell (in chunks: no (n_cells, k, dim) copy of a big mesh)."""
-    big = 0.0
-    for blk in mesh.blocks:
-        for start in range(0, len(blk), 65536):
-            x = mesh.points[blk.cells[start:start + 65536]]
-            big = max(big, float(np.sqrt(np.sum((x.max(axis=1) - x.min(axis=1)) ** 2, axis=1)).max()))
-    return big
-
-
-def _check_unused_materials(scene: Scene, mesh, which) -> None:
-    """Every [[material]] must model some cell: one that none does is a mistake in the scene."""
-    used = set()
-    for w in which:
-        used.update(int(i) for i in np.unique(w))
-    for i, mat in enumerate(scene.materials):
-        if i not in used:
-            raise SceneError(f"material[{i}]: no cell uses it: {_why_unused(scene, mesh, which, i)}; "
-                             "remove it, or change its region or box")
-
-
-def _why_unused(scene: Scene, mesh, which, i: int) -> str:
-    """The region/box matches nothing, or every cell it matches went to earlier materials."""
-    tol = box_tolerance(mesh.points)
-    earlier = set()
-    for blk, w in zip(mesh.blocks, which):
-        hit = _material_mask(scene.materials[i], blk, _centroids(mesh, blk), tol)
-        earlier.update(int(j) for j in np.unique(w[hit]))
-    mat = scene.materials[i]
-    if earlier:
-        names = ", ".join(f"material[{j}]" for j in sorted(earlier))
-        return f"every cell it matches is taken by {names} (first match wins)"
-    what = f"region {mat.region!r}" + ("" if mat.box is None else " and box")
-    types = ", ".join(mesh.cell_types())
-    tags = sorted({int(t) for b in mesh.blocks if b.tags is not None for t in np.unique(b.tags)})
-    return f"no cell matches its {what} (the mesh has {types} cells" + (f", tags {tags})" if tags else ", no tags)")
-
-
-def _check_adapt(scene: Scene, mesh, which) -> None:
-    """Every law a switch_law rule can reach must exist for the cells it reaches; refine needs simplices."""
-    for r, rule in enumerate(scene.adapt):
-        key = f"adapt[{r}]"
-        if rule.action == "refine":
-            bad = sorted({b.type for b in mesh.blocks} - {"triangle", "tetra"})
-            if bad:
-                raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
-            continue
-        for blk, w in zip(mesh.blocks, which):
-            for i in np.unique(w):
-                m = scene.materials[int(i)]
-                # chains count: hooke -> stvk -> neohookean reaches neohookean through rule 1
-                if rule.law not in reachable_laws(m.law, scene.adapt)[1:]:
-                    continue
-                _catalogue_check(f"{key}.law", blk.type, rule.law, m.quadrature)
-                try:
-                    switch_parameters(m, rule.law)
-                except SceneError as exc:
-                    raise SceneError(f"{key}.law: {exc}") from None
-
-
-def switch_applies(rule: Adapt, law: str) -> bool:
-    """Whether a switch_law rule moves elements that are under `law`."""
-    return rule.action == "switch_law" and law != rule.law and rule.from_law in (None, law)
-
-
-def reachable_laws(law: str, rules) -> list:
-    """The material's law first, then every law switch_law rules can move its cells to (in rule order).
-
-    Reachability is transitive (hooke -> stvk -> stable_neohookean)."""
-    reach = [law]
-    grew = True
-    while grew:
-        grew = False
-        for rule in rules:
-            if rule.action == "switch_law" and rule.law not in reach and any(switch_applies(rule, x) for x in reach):
-                reach.append(rule.law)
-                grew = True
-    return reach
-
-
-def switch_parameters(material: Material, law_name: str) -> dict:
-    """Native parameters of `law_name` for a material written for another law (from E, nu, or same names)."""
-    from .. import laws
-    law = laws.get(law_name)
-    if material.E is not None and material.nu is not None:
-        return law.native_parameters(E=material.E, nu=material.nu)
-    missing = [p for p in law.parameters if p not in material.params]
-    if missing:
-        raise SceneError(f"material with law {material.law!r} gives no E, nu and no {', '.join(missing)} "
-                         f"for law {law_name!r}; give E and nu")
-    return law.native_parameters(**{p: material.params[p] for p in law.parameters})

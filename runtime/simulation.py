@@ -284,7 +284,7 @@ class Simulation:
         explicit = isinstance(self.integrator, Explicit)
         due = not explicit or frame or step % EXPLICIT_ENERGY_EVERY == 0
         elastic = None
-        if "energy" in model.outputs and due:
+        if "energy" in self.integrator.outputs and due:
             saved = ctx.asm.time
             try:
                 elastic = ctx.asm.energy(ctx.u)

@@ -1,0 +1,225 @@
+"""A scene on its mesh: the mesh is generated or read (after the memory estimate) and the
+scene is checked against it.
+
+    mesh = load_mesh(scene)                 # what Scene.load_mesh() does (cached on the scene)
+    check_against_mesh(scene, mesh)         # what Scene.validate() does
+    mesh = build_mesh(spec)                 # a MeshSpec alone (no scene): generated or read, checked
+
+The scene itself (runtime.scene) is schema and parsing; boxes, regions and the material of
+each cell come from runtime.regions.  Errors name the scene key (SceneError).
+"""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..generator.catalogue import entries, quadratures
+from . import resources
+from .errors import SceneError, TensormassError
+from . import mesh as _mesh          # module attribute lookups: tests stand in for read_mesh, generate_bar
+from .mesh import MeshError, check_coordinates
+from .regions import (assign_materials, box_contains, box_tolerance, check_unused_materials, prescribed_values,
+                      reachable_laws, switch_parameters)
+
+__all__ = ["load_mesh", "scene_mesh", "build_mesh", "check_against_mesh", "catalogue_check", "PROBE_TOLERANCE"]
+
+# A probe reports the displacement of its nearest node: farther than this share of the
+# body's size (bounding box diagonal) from every node, and farther than the largest cell,
+# it is not on the body.
+PROBE_TOLERANCE = 0.1
+
+
+# ============================================================================== building the mesh
+
+
+def load_mesh(scene):
+    """The scene's mesh (generated or read once, then cached); MeshError-based problems become SceneError.
+
+    The run's memory is estimated and checked against the limit (scene.max_memory) first: for
+    a generated bar before it is built, for a file right after it is read (ResourceError).
+    """
+    mesh = getattr(scene, "_mesh", None)
+    if mesh is None:
+        spec = scene.mesh
+        key = "mesh.file" if spec.file is not None else "mesh"
+        try:
+            if spec.file is not None:
+                mesh = _mesh.read_mesh(spec.file)
+                check_coordinates(mesh.points)
+                _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
+            else:
+                _check_resources(scene, resources.MeshCounts.of_bar(spec))
+                mesh = _mesh.generate_bar(spec.size, spec.cells, spec.element, spec.origin)
+                check_coordinates(mesh.points)
+        except MeshError as exc:
+            raise SceneError(f"{key}: {exc}") from None
+        scene._mesh = mesh
+    return mesh
+
+
+def _check_resources(scene, counts) -> None:
+    est = resources.estimate(counts, materials=scene.materials, solver=scene.solver, adapt=scene.adapt)
+    resources.check(est, scene.max_memory, what=f"scene {scene.name!r}")
+    scene._estimate = est
+
+
+def scene_mesh(scene):
+    """The scene's mesh (its cached load_mesh() when it has one), checked (check_mesh)."""
+    if hasattr(scene, "load_mesh"):
+        mesh = scene.load_mesh()
+        _mesh.check_mesh(mesh)
+        return mesh
+    return build_mesh(scene.mesh)
+
+
+def build_mesh(spec):
+    """Generate or read the mesh of a MeshSpec and check it."""
+    if spec.file:
+        mesh = _mesh.read_mesh(spec.file)
+    elif spec.generate in (None, "bar"):
+        dim = 2 if spec.element in ("triangle", "triangle6", "quad") or len(spec.cells) == 2 else 3
+        bar = SimpleNamespace(size=tuple(spec.size)[:dim], cells=tuple(spec.cells)[:dim], element=spec.element)
+        resources.check(resources.estimate(resources.MeshCounts.of_bar(bar)), what="the generated bar")
+        mesh = _mesh.generate_bar(tuple(spec.size)[:dim], tuple(spec.cells)[:dim], spec.element,
+                            tuple(spec.origin)[:dim])
+    else:
+        raise TensormassError(f"mesh.generate: unknown generator {spec.generate!r} (known: bar)")
+    _mesh.check_mesh(mesh)
+    return mesh
+
+
+# ============================================================================== checking the scene against it
+
+
+def catalogue_check(key, element, law, quadrature):
+    """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
+    try:
+        entries(elements=[element], law_names=[law], quadrature_names=[quadrature])
+    except ValueError:
+        try:
+            available = ", ".join(quadratures(element, law))
+        except Exception:  # noqa: BLE001 - only for the message
+            available = "?"
+        raise SceneError(f"{key}: quadrature {quadrature!r} is not available for {element} with law "
+                         f"{law!r}; available: {available}") from None
+
+
+def check_against_mesh(scene, mesh) -> None:
+    """Checks that need the mesh: vector sizes, boxes that hold no node, cells without a material,
+    unused materials, conflicting [[fixed]], probes off the body, kernels that do not exist."""
+    try:                                  # NaN would make every box test below fail
+        check_coordinates(mesh.points)
+    except MeshError as exc:
+        raise SceneError(f"{'mesh.file' if scene.mesh.file is not None else 'mesh'}: {exc}") from None
+    dim = mesh.dim
+
+    def vec(value, key):
+        if value is not None and len(value) != dim:
+            raise SceneError(f"{key}: expected {dim} components, got {len(value)} (the mesh is {dim}D)")
+
+    # vectors of file meshes could not be checked while parsing
+    g = scene.loads.gravity
+    if len(g) != dim:
+        if not any(g) and scene.mesh.file is not None:
+            scene.loads.gravity = (0.0,) * dim
+        else:
+            vec(g, "loads.gravity")
+    tol = box_tolerance(mesh.points)
+    lo, hi = (mesh.points.min(axis=0), mesh.points.max(axis=0)) if mesh.n_points else (None, None)
+    bounds = "" if lo is None else (f" (mesh bounds [{', '.join(f'{v:g}' for v in lo)}] .. "
+                                    f"[{', '.join(f'{v:g}' for v in hi)}])")
+    for i, m in enumerate(scene.materials):
+        if m.box is not None:
+            vec(m.box[0], f"material[{i}].box")
+    for i, f in enumerate(scene.fixed):
+        vec(f.box[0], f"fixed[{i}].box")
+        vec(f.displacement, f"fixed[{i}].displacement")
+        if f.components is not None and max(f.components) >= dim:
+            raise SceneError(f"fixed[{i}].components: component {max(f.components)} does not exist in {dim}D")
+        if not box_contains(f.box, mesh.points, tol).any():
+            raise SceneError(f"fixed[{i}].box: no mesh node inside{bounds}")
+    counters = {"force": 0, "traction": 0}
+    for load in scene.loads.nodal:
+        key = f"loads.{load.kind}[{counters[load.kind]}]"
+        counters[load.kind] += 1
+        vec(load.box[0], f"{key}.box")
+        vec(load.force, f"{key}.value")
+        if not box_contains(load.box, mesh.points, tol).any():
+            raise SceneError(f"{key}.box: no mesh node inside{bounds}")
+    for i, p in enumerate(scene.probes):
+        vec(p.point, f"probe[{i}].point")
+    prescribed_values(scene.fixed, mesh.points, tol)
+    _check_probes(scene, mesh)
+
+    # every cell needs a material, and every (cell type, law, quadrature) in use must exist
+    which = assign_materials(mesh, scene.materials)
+    offset = 0
+    for blk, w in zip(mesh.blocks, which):
+        orphans = np.flatnonzero(w < 0)
+        if orphans.size:
+            ids = ", ".join(str(int(offset + c)) for c in orphans[:8]) + (", ..." if orphans.size > 8 else "")
+            tag = "" if blk.tags is None else f" (tag {int(blk.tags[orphans[0]])})"
+            raise SceneError(f"material: {orphans.size} {blk.type} cell(s){tag} match no [[material]]: "
+                             f"cells [{ids}]; add a last [[material]] with region = \"all\"")
+        for i in np.unique(w):
+            m = scene.materials[int(i)]
+            catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
+        offset += len(blk)
+    check_unused_materials(scene.materials, mesh, which)
+    _check_adapt(scene, mesh, which)
+
+
+def _check_probes(scene, mesh) -> None:
+    """A probe reports its nearest node: refuse probes that are not on the body."""
+    if not scene.probes or not mesh.n_points:
+        return
+    size = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
+    cell = None                           # largest cell diagonal, computed only when needed
+    for i, p in enumerate(scene.probes):
+        d2 = np.sum((mesh.points - np.asarray(p.point, dtype=float)) ** 2, axis=1)
+        node = int(np.argmin(d2))
+        dist = math.sqrt(float(d2[node]))
+        if dist <= PROBE_TOLERANCE * size:
+            continue
+        cell = _largest_cell(mesh) if cell is None else cell
+        if dist <= cell:                  # inside a coarse cell: its nodes are all that far
+            continue
+        at = ", ".join(f"{float(x):g}" for x in mesh.points[node])
+        raise SceneError(f"probe[{i}].point: probe {p.name!r} at {list(p.point)} is {dist:.3g} m from the nearest "
+                         f"mesh node (node {node} at [{at}]), more than {PROBE_TOLERANCE:.0%} of the body's size "
+                         f"({size:.3g} m) and than its largest cell ({cell:.3g} m): it is not on the body, and "
+                         "a probe reports the displacement of its nearest node")
+
+
+def _largest_cell(mesh) -> float:
+    """Largest bounding-box diagonal of a cell (in chunks: no (n_cells, k, dim) copy of a big mesh)."""
+    big = 0.0
+    for blk in mesh.blocks:
+        for start in range(0, len(blk), 65536):
+            x = mesh.points[blk.cells[start:start + 65536]]
+            big = max(big, float(np.sqrt(np.sum((x.max(axis=1) - x.min(axis=1)) ** 2, axis=1)).max()))
+    return big
+
+
+def _check_adapt(scene, mesh, which) -> None:
+    """Every law a switch_law rule can reach must exist for the cells it reaches; refine needs simplices."""
+    for r, rule in enumerate(scene.adapt):
+        key = f"adapt[{r}]"
+        if rule.action == "refine":
+            bad = sorted({b.type for b in mesh.blocks} - {"triangle", "tetra"})
+            if bad:
+                raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
+            continue
+        for blk, w in zip(mesh.blocks, which):
+            for i in np.unique(w):
+                m = scene.materials[int(i)]
+                # chains count: hooke -> stvk -> neohookean reaches neohookean through rule 1
+                if rule.law not in reachable_laws(m.law, scene.adapt)[1:]:
+                    continue
+                catalogue_check(f"{key}.law", blk.type, rule.law, m.quadrature)
+                try:
+                    switch_parameters(m, rule.law)
+                except SceneError as exc:
+                    raise SceneError(f"{key}.law: {exc}") from None
