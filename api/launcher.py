@@ -9,7 +9,7 @@ EXIT_INTERRUPTED = 130      # runtime.errors.EXIT_INTERRUPTED, not imported: tha
 
 def main(argv=None) -> int:
     try:
-        from .generator.cli import main as cli_main
+        from .apps.cli import main as cli_main
         return cli_main(argv)
     except KeyboardInterrupt:
         print("tensormass: interrupted", file=sys.stderr)

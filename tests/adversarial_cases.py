@@ -5,7 +5,7 @@ harness that replays one through the real command line and says how it ended.
     result = replay(CASES[0])          # Result: exit code, output, outcome, problems
     result.passed                      # met its expectation, no crash/traceback/silent wrong/half-written
 
-Each Case is plain data: the argv given to ``tensormass.generator.cli.main`` (run in a fresh
+Each Case is plain data: the argv given to ``tensormass.apps.cli.main`` (run in a fresh
 temporary folder, paths relative to it), the files it builds there first (scene TOML text,
 bytes, a mesh described as points + cells + damage, folders, links, fifos), environment
 variables, earlier runs (an old summary, old frames, a compiled library to corrupt), and
@@ -589,7 +589,7 @@ def _forget_kernels() -> None:
 
 def _call_main(argv) -> tuple:
     """(exit code or None, stdout, stderr, escaped exception text or None)."""
-    from tensormass.generator.cli import main
+    from tensormass.apps.cli import main
     out, err = io.StringIO(), io.StringIO()
     code, escaped = None, None
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():

@@ -16,7 +16,7 @@ from tensormass import laws
 from tensormass.runtime import kernels as kernels_module
 from tensormass.runtime.adapt import CRITERIA, Adapter, Change, criteria
 from tensormass.runtime.assembly import Assembler
-from tensormass.runtime.commands import run_scene
+from tensormass.apps.commands import run_scene
 from tensormass.runtime.errors import TensormassError
 from tensormass.runtime.integrators import Context
 from tensormass.runtime.mesh import CellBlock, Mesh, check_mesh, generate_bar

@@ -10,8 +10,8 @@ import pytest
 
 import tensormass as tm
 from helpers import random_elements, relative_error
-from tensormass.runtime import bench
-from tensormass.runtime.classic import load_classic
+from tensormass.apps import bench
+from tensormass.apps.classic import load_classic
 
 CASES = [(element, law, quadrature)
          for element, quadrature in (("tetra", "gauss1"), ("hexahedron", "gauss2"))
@@ -109,7 +109,7 @@ def test_unknown_entry_is_an_error():
 
 
 def test_quick_steps_bench_writes_json(tmp_path, monkeypatch):
-    from tensormass.runtime import bench_steps
+    from tensormass.apps import bench_steps
     monkeypatch.setitem(__import__("sys").modules, "felupe", None)     # comparison skipped
     lines = []
     path = tmp_path / "steps.json"
@@ -131,7 +131,7 @@ def test_quick_steps_bench_writes_json(tmp_path, monkeypatch):
 
 def test_felupe_comparison_when_installed():
     pytest.importorskip("felupe")
-    from tensormass.runtime import bench_steps
+    from tensormass.apps import bench_steps
     report = bench_steps.compare_newton(bench_steps.QUICK_NEWTON_CASE, 1, 1, progress=None)
     assert report["felupe"]["free_dofs"] == report["free_dofs"]
     assert report["felupe_ratio"] > 0

@@ -1,7 +1,7 @@
 """Issue #10, command line and outputs: exit codes, safe --json and output folders, the .pvd
 appended in O(1) per frame, health marks on frames, and the tracebacks turned into messages.
 
-In-process through generator.cli.main (the real parser, the real exit-code mapping); one
+In-process through apps.cli.main (the real parser, the real exit-code mapping); one
 subprocess test for Ctrl-C. Scenes are a 4 x 1 x 1 hexahedral bar: fast once numba's cache is warm.
 """
 from __future__ import annotations
@@ -24,8 +24,9 @@ import meshio
 import numpy as np
 import pytest
 
-from tensormass.generator.cli import main
-from tensormass.runtime import commands, kernels, output
+from tensormass.apps import commands
+from tensormass.apps.cli import main
+from tensormass.runtime import kernels, output
 from tensormass.runtime.errors import RunInterrupted, RunStopped
 from tensormass.runtime.mesh import MeshError, generate_bar, read_mesh, to_meshio
 from tensormass.runtime.output import Writer, xml_comment
@@ -492,7 +493,7 @@ def test_ctrl_c_during_a_run(tmp_path):
     summary saying "interrupted"."""
     scene = scene_file(tmp_path, solver='kind = "implicit_euler"\ndt = 0.001\nsteps = 100000')
     out, js = tmp_path / "out", tmp_path / "s.json"
-    proc = subprocess.Popen([sys.executable, "-m", "tensormass.generator.cli", "run", str(scene), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "tensormass.apps.cli", "run", str(scene), "--out", str(out),
                              "--json", str(js), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tmp_path)
     try:

@@ -13,7 +13,7 @@ import tensormass as tm
 from tensormass import laws
 from tensormass.generator import kinematics
 from tensormass.generator.catalogue import entries
-from tensormass.generator.cli import committed_dir, main
+from tensormass.apps.cli import committed_dir, main
 from tensormass.generator.constants import hoist
 from tensormass.generator.elements import element
 from tensormass.generator.ir import build_ir, exact_degree, law_degree

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from tensormass.runtime.reports.accuracy import COLUMNS, add_accuracy_command, pareto_front, run_accuracy
+from tensormass.apps.reports.accuracy import COLUMNS, add_accuracy_command, pareto_front, run_accuracy
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -137,15 +137,15 @@ def test_cli_route(tmp_path, monkeypatch):
     with pytest.raises(SystemExit):
         parser.parse_args(["accuracy"])                        # --out is required
     calls = []
-    import tensormass.runtime.reports.accuracy as acc
+    import tensormass.apps.reports.accuracy as acc
     monkeypatch.setattr(acc, "run_accuracy", lambda out, scene_path=None, quick=False: calls.append((out, scene_path, quick)))
     assert args.run(args) == 0
     assert calls == [("d", "beam.toml", False)]
 
 
 def test_report_cli_route(tmp_path):
-    """Through `report accuracy` (runtime/reports/__init__.py), with a real tiny scene."""
-    from tensormass.runtime.reports import add_report_command
+    """Through `report accuracy` (apps/reports/__init__.py), with a real tiny scene."""
+    from tensormass.apps.reports import add_report_command
     scene = tmp_path / "tiny.toml"
     scene.write_text(SCENE)
     parser = argparse.ArgumentParser(prog="tensormass")
@@ -198,7 +198,7 @@ def test_volume_change(others):
 def test_deformed_volume_of_a_sheared_hexahedron():
     import numpy as np
     from tensormass.runtime.mesh import generate_bar
-    from tensormass.runtime.reports.benchmarks import deformed_volume
+    from tensormass.apps.reports.benchmarks import deformed_volume
     mesh = generate_bar((2.0, 1.0, 1.0), (2, 1, 1), "hexahedron")
     u = np.zeros_like(mesh.points)
     assert deformed_volume(mesh, u) == pytest.approx(2.0)
@@ -239,7 +239,7 @@ def cube(tmp_path_factory):
 
 @pytest.mark.parametrize("kind", ["shear", "torsion"])
 def test_cube_against_thesis_formula_and_convergence(cube, kind):
-    from tensormass.runtime.reports.benchmarks import shear_analytic, torsion_analytic
+    from tensormass.apps.reports.benchmarks import shear_analytic, torsion_analytic
     out, rows = cube
     analytic = shear_analytic() if kind == "shear" else torsion_analytic()
     mine = [r for r in rows if r["benchmark"] == kind]
@@ -262,7 +262,7 @@ def test_cube_against_thesis_formula_and_convergence(cube, kind):
 def test_cube_reactions_sign_and_linearity():
     """Reactions push back along the prescribed motion; the torque is ~linear in a small angle."""
     import numpy as np
-    from tensormass.runtime.reports.benchmarks import cube_run
+    from tensormass.apps.reports.benchmarks import cube_run
     s, _, f = cube_run("shear", "hexahedron", [2, 2, 2], trace=False)
     _, _, t = cube_run("torsion", "hexahedron", [2, 2, 2], theta=0.02, trace=False)
     _, _, t1 = cube_run("torsion", "hexahedron", [2, 2, 2], theta=0.01, trace=False)
@@ -302,7 +302,7 @@ def test_user_scene_settings_cli(tmp_path, monkeypatch):
     args = parser.parse_args(["accuracy", "s.toml", "--elements", "hexahedron", "tetra10", "--laws", "hooke", "stvk",
                               "--quadratures", "gauss1", "gauss2", "--levels", "3", "--out", "d"])
     calls = []
-    import tensormass.runtime.reports.accuracy as acc
+    import tensormass.apps.reports.accuracy as acc
     monkeypatch.setattr(acc, "run_accuracy", lambda out, **kw: calls.append((out, kw)))
     assert args.run(args) == 0
     assert calls == [("d", {"scene_path": "s.toml", "quick": False, "elements": ["hexahedron", "tetra10"],

@@ -8,8 +8,8 @@ import re
 import numpy as np
 import pytest
 
-from tensormass.runtime.reports import stability
-from tensormass.runtime.reports.stability import COLUMNS, add_stability_command, min_det_F, run_stability
+from tensormass.apps.reports import stability
+from tensormass.apps.reports.stability import COLUMNS, add_stability_command, min_det_F, run_stability
 
 
 @pytest.fixture(scope="module")
@@ -147,8 +147,8 @@ def test_cli_quick_end_to_end(tmp_path):
 
 def test_report_parser_route(tmp_path, monkeypatch):
     """The runtime's `report stability` sub-command reaches this module."""
-    pytest.importorskip("tensormass.runtime.reports.accuracy")     # owned by the accuracy report
-    from tensormass.runtime.reports import add_report_command
+    pytest.importorskip("tensormass.apps.reports.accuracy")     # owned by the accuracy report
+    from tensormass.apps.reports import add_report_command
     monkeypatch.setattr(stability, "run_stability", lambda out, quick=False, progress=print: [{"ok": True}])
     parser = argparse.ArgumentParser(prog="tensormass")
     add_report_command(parser.add_subparsers(dest="command", required=True))

@@ -7,7 +7,7 @@ import meshio
 import numpy as np
 import pytest
 
-from tensormass.generator.cli import main
+from tensormass.apps.cli import main
 from tensormass.runtime import mesh as mesh_module
 from tensormass.runtime import resources
 from tensormass.runtime.mesh import bar_counts, generate_bar, to_meshio

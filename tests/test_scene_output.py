@@ -14,8 +14,8 @@ import meshio
 import numpy as np
 import pytest
 
-from tensormass.runtime import commands
-from tensormass.runtime.commands import ProgressBar, add_commands, demo_text
+from tensormass.apps import commands
+from tensormass.apps.commands import ProgressBar, add_commands, demo_text
 from tensormass.runtime.errors import TensormassError
 from tensormass.runtime.mesh import generate_bar, to_meshio
 from tensormass.runtime.output import Writer
@@ -436,7 +436,7 @@ def test_progress_bar_text():
 
 
 def _main(argv):
-    """What generator.cli.main does with these subcommands (exit code 2 on bad input)."""
+    """What apps.cli.main does with these subcommands (exit code 2 on bad input)."""
     parser = argparse.ArgumentParser(prog="tensormass")
     sub = parser.add_subparsers(dest="command", required=True)
     add_commands(sub)

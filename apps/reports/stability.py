@@ -28,9 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import health
-from ..errors import TensormassError
-from ..output import write_text_atomic
+from ... import laws
+from ...runtime import health
+from ...runtime.errors import TensormassError
+from ...runtime.output import write_text_atomic
+from ...runtime.scene import Material, Scene
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
 
@@ -121,8 +123,7 @@ class _Run:
 
     def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
         """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
-        from ..scene import Scene
-        from ..simulation import Simulation
+        from ...runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
         try:
             scene = Scene.from_dict(scene_data)
             self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0)
@@ -172,7 +173,6 @@ class _Run:
             self.min_det = min(self.min_det, low)
 
     def _refuse_inverted(self, sim, u):
-        from ... import laws
         for p in sim.model.parts:
             if laws.get(p.law).requires_positive_J:
                 bad = p.kernel.inverted(p.D_active, sim.model.element_displacements(p, u))
@@ -259,9 +259,9 @@ def case_poisson(quick):
 
 
 def _stable_dt(scene_data) -> float:
-    from ..integrators import Context, stable_time_step
-    from ..model import Model
-    from ..scene import Scene
+    # deferred: model and integrators cost ~0.2 s at every CLI start
+    from ...runtime.integrators import Context, stable_time_step
+    from ...runtime.model import Model
     return float(stable_time_step(Context(Model.from_scene(Scene.from_dict(scene_data)))))
 
 
@@ -285,7 +285,7 @@ def case_explicit(quick):
 
 
 def _rest_points(size, cells, element="hexahedron"):
-    from ..mesh import generate_bar
+    from ...runtime.mesh import generate_bar    # deferred: mesh costs ~0.02 s at every CLI start
     return generate_bar(size, cells, element).points
 
 
@@ -362,13 +362,13 @@ def case_scramble(quick):
 
 def case_inverted_rest(quick):
     """6. a rest mesh with one element's nodes swapped: refused, naming the element."""
-    from ..mesh import generate_bar
-    from ..model import Model
-    from ..scene import Material
     element = 1
     row = {c: "" for c in COLUMNS}
     row.update(case="inverted rest element", law="stvk", integrator="static", expected=
                f"refused (...) naming element {element}")
+    # deferred: mesh and model cost ~0.05 s at every CLI start
+    from ...runtime.mesh import generate_bar
+    from ...runtime.model import Model
     start = time.perf_counter()
     mesh = generate_bar(BAR, (3, 1, 1), "hexahedron")
     cells = mesh.blocks[0].cells
@@ -403,9 +403,9 @@ def case_sliver(quick):
 
 def case_rotation(quick):
     """8. a rigid 90 deg rotation as the state: Hooke gives ghost forces, finite-strain laws do not."""
-    from ..assembly import Assembler
-    from ..model import Model
-    from ..scene import Scene
+    # deferred: model and assembly cost ~0.1 s at every CLI start
+    from ...runtime.assembly import Assembler
+    from ...runtime.model import Model
     laws_ = ("hooke", "stvk", "stable_neohookean") if quick else (
         "hooke", "stvk", "neohookean", "stable_neohookean", "mooney_rivlin")
     rows = []

@@ -5,14 +5,14 @@
 
 `kernels` times, single-threaded and on a batch of random non-inverted
 elements, forces and forces+stiffness of every selected catalogue entry with
-each backend and with the classic loop (runtime/classic.py) on the same data;
+each backend and with the classic loop (apps/classic.py) on the same data;
 rates are elements per second, best of `repeats` (the runs of the different
 implementations are interleaved so that a noisy neighbour hurts all alike).
 `compile` compiles the largest catalogue kernels with the C compiler into a
 temporary folder (seconds, peak MB) and times numba's cold first calls in a
 fresh subprocess (own NUMBA_CACHE_DIR), against a budget.
 
-    from tensormass.runtime.bench import run_kernel_bench
+    from tensormass.apps.bench import run_kernel_bench
     report = run_kernel_bench(n_elements=100_000, entries=["tetra_stvk_gauss1"], json_path="bench.json")
 """
 from __future__ import annotations
@@ -20,17 +20,25 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
-from .errors import TensormassError
-from .output import write_json_atomic
+from ..generator.catalogue import Entry
+from ..generator.catalogue import entries as catalogue
+from ..runtime.compile import build, cflags, compiler, source_path
+from ..runtime.errors import TensormassError
+from ..runtime.kernels import BACKENDS, load_kernel, load_recompute_kernel
+from ..runtime.output import write_json_atomic
+from ..runtime.samples import random_elements
+from .bench_steps import add_steps_command
+from .classic import LAWS, load_classic
+from .machine import format_machine, machine_info
 
 DEFAULT_ENTRIES = tuple(f"{element}_{law}_{quadrature}"
                         for element, quadrature in (("tetra", "gauss1"), ("hexahedron", "gauss2"))
@@ -47,56 +55,10 @@ KINDS = ("forces", "forces_and_stiffness")
 NUMBA_FUNCTIONS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")
 
 
-# -- machine ------------------------------------------------------------------------------------
-def machine_info() -> dict:
-    """CPU model, core counts and tool versions (what the numbers depend on)."""
-    import numba
-
-    info = {"cpu": platform.processor() or platform.machine(), "machine": platform.machine(),
-            "system": f"{platform.system()} {platform.release()}",
-            "logical_cores": os.cpu_count(), "python": platform.python_version(),
-            "numpy": np.__version__, "numba": numba.__version__}
-    try:
-        info["usable_cores"] = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        info["usable_cores"] = os.cpu_count()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
-            text = handle.read()
-        for line in text.splitlines():
-            if line.startswith("model name"):
-                info["cpu"] = line.split(":", 1)[1].strip()
-                break
-        physical = {(b.get("physical id"), b.get("core id"))
-                    for b in ({k.strip(): v.strip() for k, _, v in (ln.partition(":") for ln in block.splitlines())}
-                              for block in text.split("\n\n")) if "core id" in b}
-        if physical:
-            info["physical_cores"] = len(physical)
-    except OSError:
-        pass
-    try:
-        from .compile import cflags, compiler
-        command = compiler()
-        done = subprocess.run(command + ["--version"], capture_output=True, text=True, timeout=60)
-        info["cc"] = (done.stdout or done.stderr).splitlines()[0].strip()
-        info["cflags"] = " ".join(cflags())
-    except (TensormassError, OSError, subprocess.SubprocessError, IndexError):
-        info["cc"] = None
-    return info
-
-
-def format_machine(info: dict) -> str:
-    cores = f"{info.get('physical_cores', '?')} physical / {info.get('logical_cores')} logical, {info.get('usable_cores')} usable"
-    return (f"CPU: {info['cpu']} ({cores})\n"
-            f"python {info['python']}, numpy {info['numpy']}, numba {info['numba']}, "
-            f"cc: {info.get('cc') or 'none'} {info.get('cflags', '')}".rstrip())
-
-
 # -- catalogue names ----------------------------------------------------------------------------
 def resolve_entries(names) -> list:
     """Catalogue entries from names like 'tetra_stvk_gauss1' (laws may hold underscores)."""
-    from ..generator.catalogue import entries
-    known = {e.name: e for e in entries()}
+    known = {e.name: e for e in catalogue()}
     out = []
     for value in names:
         for name in (v for v in str(value).split(",") if v):
@@ -107,31 +69,6 @@ def resolve_entries(names) -> list:
 
 
 # -- inputs -------------------------------------------------------------------------------------
-def random_elements(element: str, n: int, seed: int = 0, straight: bool = False, distortion: float = 0.08) -> np.ndarray:
-    """n random well-shaped elements: random affine images (det >= 0.5) of the reference
-    element, moved, with every node perturbed by `distortion` (0.3x that for quadratic
-    elements, whose midside nodes tolerate less). straight=True then puts midside nodes
-    back at their edge midpoints (what 'exact' quadrature requires). Shared with the tests."""
-    from ..generator.elements import element as reference
-    from ..generator.ir import _midside_edges
-    ref_el = reference(element)
-    ref = np.array([[float(x) for x in node] for node in ref_el.nodes])
-    dim = ref.shape[1]
-    rng = np.random.default_rng(seed)
-    A = np.empty((n, dim, dim))
-    todo = np.arange(n)
-    while todo.size:
-        A[todo] = np.eye(dim) + 0.3 * rng.standard_normal((todo.size, dim, dim))
-        todo = todo[np.linalg.det(A[todo]) <= 0.5]
-    scale = distortion * (0.3 if ref_el.order == 2 else 1.0)
-    X = np.einsum("ik,nak->nia", ref, A) + rng.standard_normal((n, 1, dim))
-    X += scale * rng.standard_normal(X.shape)
-    if straight:
-        for m, a, b in _midside_edges(ref_el):
-            X[:, m] = (X[:, a] + X[:, b]) / 2
-    return np.ascontiguousarray(X)
-
-
 def _valid_batch(kernel, n: int, seed: int):
     """Rest coordinates X (det J > 0 everywhere), displacements u (det F > 0) and kernel constants D."""
     straight = kernel.quadrature == "exact"
@@ -170,13 +107,11 @@ def _c_compile_record(kernel) -> dict:
     module = kernel.module
     if module.COMPILED:
         return {"seconds": module.COMPILE_SECONDS, "maxrss_mb": module.COMPILE_MAXRSS_MB, "remeasured": False}
-    from ..generator.catalogue import Entry
     return dict(compile_c(Entry(kernel.element, kernel.law, kernel.quadrature)), remeasured=True)
 
 
 def compile_c(entry) -> dict:
     """Compile the entry's C kernel into a temporary folder; {'seconds', 'maxrss_mb'}."""
-    from .compile import build, cflags, compiler, source_path
     with tempfile.TemporaryDirectory(prefix="tensormass-bench-") as folder:
         record = build(entry.name, source_path(entry), Path(folder) / f"{entry.name}.so", compiler(), cflags())
     return {"seconds": record["seconds"], "maxrss_mb": record["maxrss_mb"]}
@@ -198,11 +133,6 @@ class _Impl:
 
 
 def _bench_entry(entry, n, backends, repeats, seed, log, cold_compile) -> dict:
-    import numba
-
-    from .classic import LAWS, load_classic
-    from .kernels import load_kernel, load_recompute_kernel
-
     result = {"entry": entry.name, "element": entry.element, "law": entry.law, "quadrature": entry.quadrature,
               "n_elements": n, "rates": {}, "ratios": {}, "compile": {}, "errors": {}}
     kernels = {}
@@ -320,7 +250,6 @@ def run_kernel_bench(n_elements=100_000, entries=None, backends=("c", "numba"), 
     n_elements, repeats = int(n_elements), int(repeats)
     if n_elements < 1 or repeats < 1:
         raise ValueError("n_elements and repeats must be >= 1")
-    from .kernels import BACKENDS
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"unknown backend {', '.join(unknown)}; known: {', '.join(BACKENDS)}")
@@ -513,7 +442,6 @@ def format_compile_report(report: dict) -> str:
 def cmd_kernels(args) -> int:
     entries = args.entries
     if args.all:
-        from ..generator.catalogue import entries as catalogue
         entries = [e.name for e in catalogue()]
     backends = tuple(v for value in args.backend for v in value.split(",") if v) if args.backend else ("c", "numba")
     report = run_kernel_bench(n_elements=args.elements, entries=entries, backends=backends, repeats=args.repeats,
@@ -553,13 +481,12 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--entries", nargs="+", metavar="NAME", help=f"entries (default: {' '.join(COMPILE_ENTRIES)})")
     p.set_defaults(run=cmd_compile)
 
-    from .bench_steps import add_steps_command
     add_steps_command(sub)
     return bench
 
 
 def main(argv=None) -> int:
-    """`python -m tensormass.runtime.bench kernels|compile ...` (same as `tensormass bench ...`)."""
+    """`python -m tensormass.apps.bench kernels|compile ...` (same as `tensormass bench ...`)."""
     parser = argparse.ArgumentParser(prog="tensormass")
     add_bench_command(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["bench"] + list(sys.argv[1:] if argv is None else argv))

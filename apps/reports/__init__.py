@@ -7,10 +7,11 @@ stability  runs the stiff and extreme cases of the brief and writes a table and 
 """
 from __future__ import annotations
 
+from .accuracy import add_accuracy_command
+from .stability import add_stability_command
+
 
 def add_report_command(subparsers) -> None:
-    from .accuracy import add_accuracy_command
-    from .stability import add_stability_command
     report = subparsers.add_parser("report", help="accuracy against run time; stability on stiff and extreme cases")
     sub = report.add_subparsers(dest="report_command", required=True)
     add_accuracy_command(sub)

@@ -57,20 +57,21 @@ import io
 import math
 import time
 import tomllib
-import tracemalloc
 from pathlib import Path
 
-from ..errors import TensormassError
-from ..output import write_bytes_atomic
+from ...runtime.errors import TensormassError
+from ...runtime.output import write_bytes_atomic
+from ...runtime.scene import Scene, SceneError
+from .adaptive import BENCHMARKS as ADAPTIVE
+from .benchmarks import BENCHMARKS as CLASSIC
+from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
 COLUMNS = ["benchmark", "element", "law", "quadrature", "cells", "case", "dofs", "value", "error_analytic",
            "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
 
-# -- the built-in benchmark ------------------------------------------------------------------------
-SIZE = (1.2, 0.2, 0.2)
-E_MOD, NU, RHO, G = 1.0e8, 0.3, 800.0, 9.81
+# -- the built-in benchmark (SIZE, E_MOD, NU, RHO, G: common.py) --------------------------------------
 
 FULL = {
     "elements": ["hexahedron", "tetra", "tetra10", "wedge", "pyramid"],
@@ -91,17 +92,7 @@ QUICK = {
 QUADRATIC = ("tetra10", "triangle6")
 
 
-def analytic_tip(size=SIZE, E=E_MOD, nu=NU, rho=RHO, g=G) -> tuple:
-    """(Euler-Bernoulli, Euler-Bernoulli + Timoshenko shear with kappa = 5/6) tip deflection."""
-    L, b, h = size
-    A, I = b * h, b * h ** 3 / 12.0
-    eb = rho * g * A * L ** 4 / (8.0 * E * I)
-    Gm = E / (2.0 * (1.0 + nu))
-    return eb, eb + rho * g * A * L ** 2 / (2.0 * (5.0 / 6.0) * Gm * A)
-
-
 def cantilever_scene(element, law, quadrature, cells):
-    from ..scene import Scene
     L = SIZE[0]
     data = {
         "name": f"accuracy_{element}_{law}_{quadrature}",
@@ -119,27 +110,8 @@ def cantilever_scene(element, law, quadrature, cells):
 # -- running ---------------------------------------------------------------------------------------
 def _measure(scene, trace=True) -> tuple:
     """(Summary, tracemalloc peak in MB or nan) of one run of a validated scene."""
-    from ..simulation import Simulation
-    if trace:
-        tracemalloc.start()
-    try:
-        summary = Simulation(scene).run()
-        peak = tracemalloc.get_traced_memory()[1] / 1e6 if trace else float("nan")
-    finally:
-        if trace:
-            tracemalloc.stop()
+    summary, peak, _ = measure(scene, trace)
     return summary, peak
-
-
-def _row(element, law, quadrature, cells, summary, peak, deflection) -> dict:
-    t = summary.time
-    return {"benchmark": "cantilever", "element": element, "law": law, "quadrature": quadrature,
-            "cells": "x".join(str(int(c)) for c in cells), "case": "", "main": True,
-            "dofs": int(summary.n_free_dofs),
-            "value": float(deflection), "error_analytic": float("nan"),
-            "error_reference": float("nan"), "time_setup": float(t["setup"]),
-            "time_assembly": float(t["assembly"]), "time_solve": float(t["linear_solve"]),
-            "time_total": float(t["total"]), "peak_memory_mb": float(peak)}
 
 
 def _builtin(quick, progress, sweep) -> tuple:
@@ -160,7 +132,7 @@ def _builtin(quick, progress, sweep) -> tuple:
         for cells in levels:
             summary, peak = _measure(cantilever_scene(element, law, quad, cells))
             w = -float(summary.probes["tip"][2])
-            rows.append(_row(element, law, quad, cells, summary, peak, w))
+            rows.append(result_row(element, law, quad, cells, summary, peak, w))
             progress(f"  {element:<10} {law:<5} {quad:<6} cells {rows[-1]['cells']:<8} dofs {rows[-1]['dofs']:>6}  "
                      f"tip {w:.5g} m  total {summary.time['total']:.3f} s")
     ref_cells = cfg["reference"]
@@ -200,7 +172,6 @@ def _settings(data, element, law, quad):
 def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
     """Sweep a scene over element x law x quadrature (settings: elements / laws / quadratures lists,
     None = the scene's own) x resolution (cells x 1, 2, 4, ...; settings["levels"] of them)."""
-    from ..scene import Scene, SceneError
     path = Path(scene_path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -256,7 +227,7 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
                 summary, peak = _measure(Scene.from_dict(d, base_dir=path.parent))
                 u = [float(x) for x in summary.probes[probe]]
                 vectors.append(u)
-                rows.append(_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
+                rows.append(result_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
                 if analytic is not None:
                     rows[-1]["error_analytic"] = abs(-u[2] - analytic) / analytic
                 progress(f"  {element:<10} {law:<5} {quad:<6} cells {rows[-1]['cells']:<10} "
@@ -368,6 +339,7 @@ def _fronts(rows) -> dict:
 
 
 def _plot(rows, x, ylabel_title, fronts=None) -> bytes:
+    # deferred: matplotlib costs ~0.3 s; only the plots of a finished sweep need it
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     groups = [(b, [i for i in idx if rows[i].get("main", True)]) for b, idx in _groups(rows).items()]
@@ -511,8 +483,6 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    from .adaptive import BENCHMARKS as ADAPTIVE
-    from .benchmarks import BENCHMARKS as CLASSIC
     BENCHMARKS = {**CLASSIC, **ADAPTIVE}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)

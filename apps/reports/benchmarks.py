@@ -26,48 +26,23 @@ import tracemalloc
 
 import numpy as np
 
+from ...runtime.model import Model
+from ...runtime.scene import Scene
+from .common import analytic_tip
+from .common import benchmark_row as _row
+from .common import cells_label as _cells
+from .common import run_dict as _run
+
 __all__ = ["BENCHMARKS", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
            "deformed_volume", "VOLUME_REFERENCE", "shear_analytic", "torsion_analytic", "cube_run"]
 
 
-# -- shared helpers --------------------------------------------------------------------------------
-def _scene(data):
-    from ..scene import Scene
-    return Scene.from_dict(data)
-
-
-def _run(data, trace=True):
-    """(Summary, peak MB or nan, Simulation) of one run of a scene dict."""
-    from ..simulation import Simulation
-    scene = _scene(copy.deepcopy(data))
-    if trace:
-        tracemalloc.start()
-    try:
-        sim = Simulation(scene)
-        summary = sim.run()
-        peak = tracemalloc.get_traced_memory()[1] / 1e6 if trace else float("nan")
-    finally:
-        if trace:
-            tracemalloc.stop()
-    return summary, peak, sim
-
-
-def _row(bench, element, law, quad, cells, case, summary, peak, value) -> dict:
-    from .accuracy import _row as base_row
-    r = base_row(element, law, quad, cells, summary, peak, value)
-    r["benchmark"], r["case"], r["main"] = bench, case, True
-    return r
-
-
+# -- shared helpers (the others: common.py) ---------------------------------------------------------
 def _cfg(defaults_full, defaults_quick, quick, sweep):
     cfg = copy.deepcopy(defaults_quick if quick else defaults_full)
     if sweep:
         cfg.update(copy.deepcopy(sweep))
     return cfg
-
-
-def _cells(c) -> str:
-    return "x".join(str(int(x)) for x in c)
 
 
 # -- beam2d ----------------------------------------------------------------------------------------
@@ -293,7 +268,6 @@ def mixed_scene(element, cells, law="hooke", quadrature="gauss2"):
 
 
 def mixed(quick, progress, sweep=None) -> dict:
-    from .accuracy import analytic_tip
     cfg = _cfg(MIXED_FULL, MIXED_QUICK, quick, sweep)
     law, quad = cfg["law"], cfg["quadrature"]
     eb, timo = analytic_tip(MIXED["size"], MIXED["E"], MIXED["nu"], MIXED["rho"], MIXED["g"])
@@ -349,7 +323,6 @@ def soft_scene(element, law, cells, steps, scale=1.0):
 
 
 def large_deflection(quick, progress, sweep=None) -> dict:
-    from .accuracy import analytic_tip
     cfg = _cfg(LARGE_FULL, LARGE_QUICK, quick, sweep)
     el, steps = cfg["element"], cfg["steps"]
     L = SOFT["size"][0]
@@ -460,10 +433,10 @@ def cube_run(kind, element, cells, law="hooke", quadrature="gauss2", theta=TORSI
     z torque of the top reactions about that axis (moment arms from the undeformed positions).  The
     reaction at a prescribed dof is -f_int = dW/du (assembly.assemble returns f_int = -dW/du).
     """
-    from ..assembly import assemble
-    from ..model import Model
-    from ..simulation import Simulation
-    scene = _scene(cube_scene(kind, element, cells, law, quadrature))
+    # deferred: assembly and the simulation stack cost ~0.2 s at every CLI start
+    from ...runtime.assembly import assemble
+    from ...runtime.simulation import Simulation
+    scene = Scene.from_dict(cube_scene(kind, element, cells, law, quadrature))
     if trace:
         tracemalloc.start()
     try:

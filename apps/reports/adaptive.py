@@ -16,8 +16,9 @@ import time
 
 import numpy as np
 
-
-from .benchmarks import _cells, _row, _run
+from .common import benchmark_row as _row
+from .common import cells_label as _cells
+from .common import run_dict as _run
 
 __all__ = ["BENCHMARKS", "adaptive_beam", "refinement", "SWITCH_RULES", "beam_scene", "plate_scene"]
 

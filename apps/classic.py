@@ -12,7 +12,7 @@ the weighted volume v = w det J; every step, per point,
 with generic loops over nodes and dimensions (only the node blocks j >= i of
 the symmetric K are accumulated, then mirrored, as any careful code does).
 It exists to be benchmarked against the generated kernels
-(runtime/bench.py), and is checked against them in tests/test_bench.py.
+(apps/bench.py), and is checked against them in tests/test_bench.py.
 
     k = load_classic("hexahedron", "stvk", "gauss2")
     state = k.constants(X, E=1e6, nu=0.3)            # G, v, material, once
@@ -27,9 +27,13 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import sympy as sp
 from numba import njit
 
-from .errors import DegenerateElementError, InvertedElementError, TensormassError
+from .. import laws
+from ..generator.elements import element as reference
+from ..generator.quadrature import rule
+from ..runtime.errors import DegenerateElementError, InvertedElementError, TensormassError
 
 LAWS = {"hooke": 0, "stvk": 1, "neohookean": 2}
 HOOKE, STVK, NEOHOOKEAN = 0, 1, 2
@@ -41,11 +45,6 @@ _JIT = dict(cache=True, fastmath=False, error_model="numpy")
 @lru_cache(maxsize=None)
 def reference_tables(element: str, quadrature: str):
     """(dN (n_points, n_nodes, 3) reference gradients at the points, weights (n_points,))."""
-    import sympy as sp
-
-    from ..generator.elements import element as reference
-    from ..generator.quadrature import rule
-
     ref = reference(element)
     if ref.dim != 3:
         raise TensormassError(f"classic baseline: 3D elements only, {element!r} is {ref.dim}D")
@@ -382,7 +381,6 @@ class ClassicKernel:
         return self.n_points * (self.n_nodes * 3 + 1) + 2
 
     def constants(self, X, E=None, nu=None, **native) -> ClassicState:
-        from .. import laws
         X = np.ascontiguousarray(X, dtype=np.float64)
         if X.ndim == 2:
             X = X[None]

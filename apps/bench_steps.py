@@ -17,7 +17,9 @@ import time
 
 import numpy as np
 
-from .bench import machine_info, write_json_atomic
+from ..runtime.output import write_json_atomic
+from ..runtime.scene import Scene
+from .machine import machine_info
 
 BODIES = {
     # name: (element, cells, size)
@@ -75,8 +77,7 @@ backend = "{backend}"
 
 
 def measure(element, cells, size, law, kind, linear, steps) -> dict:
-    from .scene import Scene
-    from .simulation import Simulation
+    from ..runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, kind, linear, steps))
     t0 = time.perf_counter()
     sim = Simulation(scene)
@@ -107,8 +108,7 @@ def measure(element, cells, size, law, kind, linear, steps) -> dict:
 def health_overhead(element, cells, size, law, steps=30) -> dict:
     """The health monitor's own time per implicit Euler step against the step (30 steps, direct):
     measured by the monitor in the same run, so machine load hits both alike."""
-    from .scene import Scene
-    from .simulation import Simulation
+    from ..runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, "implicit_euler", "direct", steps))
     summary = Simulation(scene).run()
     wall = summary.per_step["wall"]
@@ -136,10 +136,10 @@ def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=
     unknowns for the band Cholesky, once per sparsity pattern) is reported apart.
     The assembly with the other kernel backend is timed too (`assembly_s_by_backend`).
     """
-    from .integrators import Context
-    from .model import Model
-    from .scene import Scene
-    from .solvers import LinearSolver, has_cholmod
+    # deferred: model, integrators and solvers cost ~0.2 s at every CLI start
+    from ..runtime.integrators import Context
+    from ..runtime.model import Model
+    from ..runtime.solvers import LinearSolver, has_cholmod
     by_backend = {}
     for other in BACKENDS:
         if other == backend:

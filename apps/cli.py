@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import filecmp
+import importlib.util
 import json
 import os
 import sys
@@ -26,17 +27,23 @@ import time
 import traceback
 from pathlib import Path
 
-from .. import laws
-from .backends import BACKENDS
-from .catalogue import entries
-from .elements import ELEMENTS
+import numpy as np
 
-EXIT_BAD_INPUT = 2          # runtime.errors holds all the exit codes; kept here for importers
+from .. import generated, laws
+from ..generator.backends import BACKENDS
+from ..generator.catalogue import entries
+from ..generator.elements import ELEMENTS, element
+from ..generator.pipeline import generate_all
+from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
+                              TensormassError)
+from ..runtime.output import check_writable
+from .bench import add_bench_command
+from .commands import add_commands
+from .reports import add_report_command
 
 
 def committed_dir() -> Path:
     """The generated/ folder of this installation (the committed catalogue)."""
-    from .. import generated
     return Path(generated.__file__).resolve().parent
 
 
@@ -62,7 +69,6 @@ def cmd_list(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from .pipeline import generate_all
     selected = entries(_names(args.element, ELEMENTS, "element"), _names(args.law, laws.names(), "law"),
                        _names(args.quadrature, None, "quadrature"))
     backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
@@ -81,8 +87,6 @@ def cmd_generate(args) -> int:
 def _output_folder(path) -> Path:
     """The --out folder of `generate`, checked before anything is generated: a folder (or a
     name still free) where this process may write."""
-    from ..runtime.errors import TensormassError
-    from ..runtime.output import check_writable
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise TensormassError(f"--out {out}: exists and is not a folder; give a folder for the generated kernels")
@@ -92,7 +96,6 @@ def _output_folder(path) -> Path:
 
 def check(selected, backends) -> int:
     """Regenerate into a temporary folder and compare byte for byte with generated/."""
-    from .pipeline import generate_all
     committed = committed_dir()
     with tempfile.TemporaryDirectory() as tmp:
         generate_all(selected, backends, Path(tmp))
@@ -121,11 +124,6 @@ def check(selected, backends) -> int:
 
 def report_numba_compile_times(selected, out: Path) -> None:
     """Import each generated numba module from `out` and time the first call of every kernel."""
-    import importlib.util
-
-    import numpy as np
-
-    from .elements import element
     slowest = (0.0, "")
     for entry in selected:
         path = out / "numba" / f"{entry.name}.py"
@@ -171,9 +169,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
     p.set_defaults(run=cmd_generate)
 
-    from ..runtime.bench import add_bench_command
-    from ..runtime.commands import add_commands
-    from ..runtime.reports import add_report_command
     add_commands(sub)                      # run, demo
     add_bench_command(sub)                 # bench kernels, bench compile, bench steps
     add_report_command(sub)                # report accuracy, report stability
@@ -182,8 +177,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run one command and turn every way it can end into an exit code and one line on stderr."""
-    from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
-                                  TensormassError)
     try:
         args = build_parser().parse_args(argv)
         return args.run(args)
