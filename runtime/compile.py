@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cache import cache_dir, writable_cache_dir
 from .errors import KernelNotFoundError, TensormassError
 
 CFLAGS = ("-O3", "-march=native", "-fPIC", "-shared", "-std=c99", "-fno-math-errno")
@@ -101,7 +102,6 @@ def source_path(entry) -> Path:
     committed = Path(generated.__file__).resolve().parent / "c" / f"{entry.name}.c"
     if committed.exists():
         return committed
-    from .kernels import cache_dir, writable_cache_dir
     cached = cache_dir() / "c" / f"{entry.name}.c"
     if not (cached.exists() and _fresh(cached)):
         from ..generator.pipeline import generate_all
@@ -137,7 +137,6 @@ def parse_metadata(source: str, where="source") -> dict:
 
 # -- building ---------------------------------------------------------------------------------
 def library_path(name: str, source: str, command: list[str], flags: list[str]) -> Path:
-    from .kernels import cache_dir
     h = hashlib.sha256()
     for part in (source, "\0".join(flags), "\0".join(command), _compiler_version(tuple(command)), _cpu_signature()):
         h.update(part.encode())
@@ -230,7 +229,6 @@ def _kill_group(proc) -> None:
 
 def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str]) -> dict:
     """Compile source into lib (atomically, with its sidecar hash); returns the compile record."""
-    from .kernels import writable_cache_dir
     writable_cache_dir(lib.parent, f"compiling C kernel {name}")
     fd, tmp = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}.", suffix=".so.tmp")
     os.close(fd)

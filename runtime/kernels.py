@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import os
 import sys
 from functools import lru_cache
 from pathlib import Path
@@ -20,55 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import laws
+from .cache import cache_dir, writable_cache_dir
+from .compile import c_module, load_c_source
 from .errors import DegenerateElementError, InvertedElementError, KernelNotFoundError, TensormassError
 
 BACKENDS = ("numba", "c")
-
-
-def cache_dir() -> Path:
-    """Where kernels generated or compiled on demand live ($TENSORMASS_CACHE overrides)."""
-    from ..generator import GENERATOR_VERSION
-    root = os.environ.get("TENSORMASS_CACHE") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tensormass"
-    return Path(root) / GENERATOR_VERSION
-
-
-def _cache_origin() -> str:
-    """Which setting chose the cache folder (what the user has to change)."""
-    if os.environ.get("TENSORMASS_CACHE"):
-        return f"$TENSORMASS_CACHE={os.environ['TENSORMASS_CACHE']}"
-    if os.environ.get("XDG_CACHE_HOME"):
-        return f"$XDG_CACHE_HOME={os.environ['XDG_CACHE_HOME']}"
-    return "the default ~/.cache/tensormass"
-
-
-def writable_cache_dir(folder, needed_for: str) -> Path:
-    """folder (inside cache_dir()), created if missing and checked writable, right before a write.
-
-    Only called where something must be written (a kernel generated or compiled now): a
-    run whose kernels are committed or already compiled works with a read-only cache.
-    Raises TensormassError naming the folder, the setting behind it and what needed it."""
-    import tempfile
-    folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".tensormass-probe-", suffix=".tmp")
-        os.close(fd)
-        os.remove(probe)
-    except OSError as exc:
-        raise TensormassError(f"kernel cache {folder} cannot be written ({_blocker(folder, exc)}; set by "
-                              f"{_cache_origin()}): {needed_for} needs it; set TENSORMASS_CACHE to a "
-                              "writable folder") from None
-    return folder
-
-
-def _blocker(folder: Path, exc: OSError) -> str:
-    """Why a folder cannot be written: an existing parent that is a file, or the OS's reason."""
-    path = folder
-    while not os.path.lexists(path) and path.parent != path:
-        path = path.parent
-    if os.path.lexists(path) and not path.is_dir():
-        return f"{path} is not a folder"
-    return exc.strerror or str(exc)
 
 
 class Kernel:
@@ -204,7 +159,6 @@ def load_kernel(element: str, law: str, quadrature: str, backend: str = "numba")
     name = Entry(element, law, quadrature).name
     if backend == "numba":
         return Kernel(_numba_module(name, Entry(element, law, quadrature)), "numba")
-    from .compile import c_module
     return Kernel(c_module(Entry(element, law, quadrature)), "c")
 
 
@@ -249,5 +203,4 @@ def load_recompute_kernel(element: str, law: str, quadrature: str, backend: str 
         write_atomic(path, text)
     if backend == "numba":
         return Kernel(_import_path(path, f"tensormass_recompute_{ir.name}"), "numba")
-    from .compile import load_c_source
     return Kernel(load_c_source(path, ir.name), "c")
