@@ -26,7 +26,6 @@ import tracemalloc
 
 import numpy as np
 
-from ...runtime.model import Model
 from ...runtime.scene import Scene
 from .common import analytic_tip
 from .common import benchmark_row as _row
@@ -433,8 +432,9 @@ def cube_run(kind, element, cells, law="hooke", quadrature="gauss2", theta=TORSI
     z torque of the top reactions about that axis (moment arms from the undeformed positions).  The
     reaction at a prescribed dof is -f_int = dW/du (assembly.assemble returns f_int = -dW/du).
     """
-    # deferred: assembly and the simulation stack cost ~0.2 s at every CLI start
+    # deferred: model, assembly and the simulation stack cost ~0.2 s at every CLI start
     from ...runtime.assembly import assemble
+    from ...runtime.model import Model
     from ...runtime.simulation import Simulation
     scene = Scene.from_dict(cube_scene(kind, element, cells, law, quadrature))
     if trace:
