@@ -211,17 +211,9 @@ def _chain_rule(deriv):
 
 
 def _midside_edges(ref):
-    if ref.order != 2:
-        return ()
-    corners = ref.dim + 1
-    edges = []
-    for m in range(corners, ref.n_nodes):
-        mid = ref.nodes[m]
-        for a in range(corners):
-            for b in range(a + 1, corners):
-                if all(2 * mid[k] == ref.nodes[a][k] + ref.nodes[b][k] for k in range(ref.dim)):
-                    edges.append((m, a, b))
-    return tuple(edges)
+    """(midside node, corner a, corner b) with a < b, from the element table."""
+    t = ref.type
+    return tuple((t.n_corners + m, min(e), max(e)) for m, e in enumerate(t.midside_edges))
 
 
 def _op_counts(ir: KernelIR) -> dict:

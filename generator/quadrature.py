@@ -1,4 +1,7 @@
-"""Quadrature rules on the reference elements of `elements.py`.
+"""Quadrature rules on the reference domains of the element types (tensormass.elements).
+
+Rules are chosen by the element's reference *domain* (simplex, box, prism,
+pyramid) and topological dimension, never by its name.
 
 Values are sympy numbers: exact where a closed form is short (rationals and
 square roots), otherwise sp.Float with 30 significant digits, so that the
@@ -14,15 +17,16 @@ import sympy as sp
 from sympy.integrals.quadrature import gauss_jacobi
 from sympy.utilities.iterables import multiset_permutations
 
-from .elements import ELEMENTS
+from ..elements import BOX, PRISM, PYRAMID, SIMPLEX, names as _type_names
+from .elements import element as _element
 
 DIGITS = 30
 GAUSS_RULES = ("gauss1", "gauss2", "gauss3")  # offered by every element
 MAX_N = 20  # largest N accepted in "gaussN" / "collapsedN"
 
 _R = sp.Rational
-_SIMPLEX_DOMAIN = {"triangle": "triangle", "triangle6": "triangle",
-                   "tetra": "tetra", "tetra10": "tetra"}
+# simplex rules by topological dimension
+_SIMPLEX_DOMAIN = {1: "line", 2: "triangle", 3: "tetra"}
 
 
 @dataclass(frozen=True)
@@ -31,8 +35,8 @@ class QuadratureRule:
     element: str
     points: tuple  # one tuple of `dim` coordinates per point
     weights: tuple
-    # Simplices, wedge, pyramid: total polynomial degree integrated exactly.
-    # quad/hexahedron: per-direction degree 2N-1.
+    # Simplices, prism, pyramid: total polynomial degree integrated exactly.
+    # box (quad/hexahedron): per-direction degree 2N-1.
     degree: int
 
     @property
@@ -150,6 +154,8 @@ def _collapsed_tetra(n):
 def _simplex_gauss(domain, n):
     """Cheapest rule of total degree >= n: a symmetric one if available,
     else the collapsed rule with n//2 + 1 points per direction."""
+    if domain == "line":
+        return _collapsed(domain, n // 2 + 1)
     table = _triangle_symmetric() if domain == "triangle" else _tetra_symmetric()
     for degree, pw in table:
         if degree >= n:
@@ -158,7 +164,10 @@ def _simplex_gauss(domain, n):
 
 
 def _collapsed(domain, m):
-    pw = _collapsed_triangle(m) if domain == "triangle" else _collapsed_tetra(m)
+    if domain == "line":  # [0, 1]: plain Gauss-Legendre
+        pw = [((t,), w) for t, w in zip(*_line(m))]
+    else:
+        pw = _collapsed_triangle(m) if domain == "triangle" else _collapsed_tetra(m)
     return 2 * m - 1, pw
 
 
@@ -169,30 +178,38 @@ def _make(name, element_name, degree, pw) -> QuadratureRule:
     return QuadratureRule(name, element_name, points, weights, degree)
 
 
-def _valid_names(element_name):
+def _simplex_domain(ref):
+    """'line' / 'triangle' / 'tetra' for simplex elements, else None."""
+    t = ref.type
+    return _SIMPLEX_DOMAIN.get(t.dim) if t.domain == SIMPLEX else None
+
+
+def _valid_names(ref):
     names = f"gaussN (N = 1..{MAX_N})"
-    if element_name in _SIMPLEX_DOMAIN:
+    if _simplex_domain(ref) is not None:
         names += f", collapsedN (N = 1..{MAX_N})"
     return names
 
 
 @functools.cache
 def rule(element_name: str, name: str) -> QuadratureRule:
-    """Quadrature rule `name` ("gaussN") on the reference `element_name`.
+    """Quadrature rule `name` ("gaussN") on the reference domain of `element_name`.
 
-    quad/hexahedron: N-point Gauss-Legendre per direction.
-    triangle/tetra (+ quadratic variants): exact for total degree N.
-    wedge: triangle gaussN x N-point Gauss-Legendre in zeta.
+    box (quad/hexahedron): N-point Gauss-Legendre per direction.
+    simplex (triangle/tetra + quadratic variants): exact for total degree N.
+    prism (wedge): triangle gaussN x N-point Gauss-Legendre in zeta.
     pyramid: N x N Gauss-Legendre x N-point Gauss-Jacobi collapsed to the apex.
     Simplices also accept "collapsedN" (N points per collapsed direction)."""
-    if element_name not in ELEMENTS:
-        raise ValueError(f"unknown element {element_name!r}; known: {', '.join(ELEMENTS)}")
+    try:
+        ref = _element(element_name)
+    except ValueError:
+        raise ValueError(f"unknown element {element_name!r}; known: {', '.join(_type_names())}") from None
     m = re.fullmatch(r"(gauss|collapsed)([1-9][0-9]*)", name)
     n = int(m.group(2)) if m else 0
-    domain = _SIMPLEX_DOMAIN.get(element_name)
+    domain = _simplex_domain(ref)
     if not m or n > MAX_N or (m.group(1) == "collapsed" and domain is None):
         raise ValueError(f"unknown rule {name!r} for {element_name}; valid: "
-                         f"{_valid_names(element_name)}")
+                         f"{_valid_names(ref)}")
 
     if domain is not None:
         degree, pw = (_simplex_gauss(domain, n) if m.group(1) == "gauss"
@@ -201,34 +218,43 @@ def rule(element_name: str, name: str) -> QuadratureRule:
 
     x, w = _gauss_legendre(n)
     line = list(zip(x, w))
-    if element_name == "quad":
+    kind, dim = ref.type.domain, ref.dim
+    if kind == BOX and dim == 1:
+        pw = [((a,), wa) for a, wa in line]
+        degree = 2 * n - 1
+    elif kind == BOX and dim == 2:
         pw = [((a, b), wa * wb) for b, wb in line for a, wa in line]
         degree = 2 * n - 1
-    elif element_name == "hexahedron":
+    elif kind == BOX and dim == 3:
         pw = [((a, b, c), wa * wb * wc) for c, wc in line for b, wb in line for a, wa in line]
         degree = 2 * n - 1
-    elif element_name == "wedge":
+    elif kind == PRISM and dim == 3:
         tri_degree, tri = _simplex_gauss("triangle", n)
         pw = [((p[0], p[1], c), wp * wc) for p, wp in tri for c, wc in line]
         degree = min(tri_degree, 2 * n - 1)
-    elif element_name == "pyramid":
+    elif kind == PYRAMID and dim == 3:
         # x = a (1 - z), y = b (1 - z): the Jacobian (1 - z)^2 is the Jacobi
         # weight, and the rational shape functions become polynomials in (a, b, z).
         tz, wz = _line(n, 2)
         pw = [((a * (1 - z), b * (1 - z), z), wa * wb * wzz)
               for z, wzz in zip(tz, wz) for b, wb in line for a, wa in line]
         degree = 2 * n - 1
-    else:  # pragma: no cover - every element is handled above
-        raise AssertionError(element_name)
+    else:
+        raise ValueError(f"no quadrature rule on the {dim}D {kind.name} domain of {element_name}")
     return _make(name, element_name, degree, pw)
 
 
 def rule_for_degree(element_name: str, degree: int) -> QuadratureRule:
     """Cheapest rule of this module exact for total degree >= `degree`
-    (simplices only: triangle, triangle6, tetra, tetra10)."""
-    if element_name not in _SIMPLEX_DOMAIN:
+    (simplex domains only: triangle, triangle6, tetra, tetra10, ...)."""
+    try:
+        ref = _element(element_name)
+    except ValueError:
+        ref = None
+    if ref is None or _simplex_domain(ref) is None:
+        simplices = [t for t in _type_names() if _simplex_domain(_element(t)) is not None]
         raise ValueError(f"rule_for_degree supports simplices only "
-                         f"({', '.join(_SIMPLEX_DOMAIN)}), not {element_name!r}")
+                         f"({', '.join(simplices)}), not {element_name!r}")
     d = max(int(degree), 1)
     if d > 2 * MAX_N - 1:
         raise ValueError(f"degree {degree} exceeds the supported maximum {2 * MAX_N - 1}")

@@ -9,7 +9,8 @@ Criteria (vectorised over the elements of each kernel part, current state x = X 
 - R_L   edge stretch, max over the element's edges of |l0 - l| / l0;
 - R_A   volume (area in 2D) change |S0 - S| / S0, S = sum_q w_q det J_q det F_q;
 - R_M   quality S / (c l_mean^d): 1 for the regular element of its type (c: the
-        measure of that element with unit edges), smaller when it degenerates;
+        measure of that element with unit edges, ElementType.regular_measure in
+        tensormass.elements), smaller when it degenerates;
 - R_HM  quality S H / (c l_mean^(d-1)), H the mean of inverse edge lengths (the
         thesis prints l_mean^3 in the denominator, which is not dimensionless: a typo);
 - R_S   stress criterion (1/S) sum_q w_q sum_j |N_j(g_q) f_j| = sum_j (int N_j / S) |f_j|
@@ -34,31 +35,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from .. import elements as _types
 from .errors import TensormassError
 from .scene import switch_applies
 
-__all__ = ["CRITERIA", "EDGES", "Adapter", "Change", "criteria", "part_criteria"]
+__all__ = ["CRITERIA", "Adapter", "Change", "criteria", "part_criteria"]
 
 CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 
-# Corner edges per cell type, VTK node order (quadratic cells: their corner edges).
-EDGES = {
-    "triangle": ((0, 1), (1, 2), (2, 0)),
-    "triangle6": ((0, 1), (1, 2), (2, 0)),
-    "quad": ((0, 1), (1, 2), (2, 3), (3, 0)),
-    "tetra": ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)),
-    "tetra10": ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)),
-    "hexahedron": ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4),
-                   (0, 4), (1, 5), (2, 6), (3, 7)),
-    "wedge": ((0, 1), (1, 2), (2, 0), (3, 4), (4, 5), (5, 3), (0, 3), (1, 4), (2, 5)),
-    "pyramid": ((0, 1), (1, 2), (2, 3), (3, 0), (0, 4), (1, 4), (2, 4), (3, 4)),
-}
-# Measure of the regular element with unit edges: R_M = R_HM = 1 there.
-REGULAR_MEASURE = {
-    "triangle": np.sqrt(3) / 4, "triangle6": np.sqrt(3) / 4, "quad": 1.0,
-    "tetra": 1 / (6 * np.sqrt(2)), "tetra10": 1 / (6 * np.sqrt(2)), "hexahedron": 1.0,
-    "wedge": np.sqrt(3) / 4, "pyramid": np.sqrt(2) / 6,
-}
 # A static load step is re-solved after adapting until nothing changes, at most this often.
 MAX_STATIC_PASSES = 10
 
@@ -153,7 +137,8 @@ def part_criteria(model, part, u: np.ndarray, names, asm=None) -> dict:
     X = model.mesh.points[part.cells_active]
     ue = model.element_displacements(part, u)
     dim = model.dim
-    edges = np.asarray(EDGES[part.element])
+    el = _types.get(part.element)              # corner edges and the regular element's measure
+    edges = np.asarray(el.edges)
     S0 = part.volume if part.index is None else part.volume[part.index]
     if names & {"R_A", "R_M", "R_HM", "R_S", "rotation"}:
         v, G = _geometry(part)
@@ -166,11 +151,11 @@ def part_criteria(model, part, u: np.ndarray, names, asm=None) -> dict:
         lt = np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2)
         if "R_L" in names:
             out["R_L"] = np.max(np.abs(l0 - lt) / l0, axis=1)
-        c, mean = REGULAR_MEASURE[part.element], lt.mean(axis=1)
+        c, mean = el.regular_measure, lt.mean(axis=1)
         if "R_M" in names:
-            out["R_M"] = S / (c * mean**dim)
+            out["R_M"] = S / (c * mean**el.dim)
         if "R_HM" in names:
-            out["R_HM"] = S * np.mean(1.0 / lt, axis=1) / (c * mean ** (dim - 1))
+            out["R_HM"] = S * np.mean(1.0 / lt, axis=1) / (c * mean ** (el.dim - 1))
     if "R_A" in names:
         out["R_A"] = np.abs(S0 - S) / S0
     if "rotation" in names:

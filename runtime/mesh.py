@@ -8,6 +8,13 @@ when the Jacobian determinant of its map from the VTK reference coordinates is
 positive; note that for the VTK wedge this means the base triangle (0,1,2)
 winds so that its right-hand normal points AWAY from (3,4,5).
 
+Element facts (node counts, corners, faces, edges, midside nodes, mirror
+permutations, reference domains) come from the element table, tensormass.elements.
+Cells whose topological dimension is below the space dimension (bars in 3D, ...)
+are accepted where their type allows that space dimension (ElementType.space_dims);
+for them the checks test the measure (length, area) instead of an oriented volume,
+and they take no part in the face checks.
+
 Cell ids in error messages are global: blocks are numbered in order and the
 cells of block b follow those of blocks 0..b-1.
 """
@@ -19,27 +26,27 @@ from dataclasses import dataclass, field
 from itertools import permutations
 from pathlib import Path
 
+import functools
+
 import numpy as np
 
+from .. import elements as _types
+from ..elements import BOX, PRISM, PYRAMID, SIMPLEX, ElementType, monomial_exponents
 from .errors import TensormassError
 
 __all__ = [
     "MeshError", "Mesh", "CellBlock", "NODES_PER_CELL", "SOLID_TYPES_3D", "SOLID_TYPES_2D",
     "read_mesh", "to_meshio", "generate_bar", "bar_counts", "check_mesh", "check_coordinates", "orient_cells",
-    "boundary_faces", "COORD_MAX",
+    "boundary_faces", "face_measure", "COORD_MAX", "BAR_ELEMENTS",
 ]
 
-NODES_PER_CELL = {
-    "tetra": 4, "tetra10": 10, "hexahedron": 8, "wedge": 6, "pyramid": 5,
-    "triangle": 3, "triangle6": 6, "quad": 4,
-}
-SOLID_TYPES_3D = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid")
-SOLID_TYPES_2D = ("triangle", "triangle6", "quad")
-
-# Corner count: quadratic cells are checked topologically through their corners.
-_CORNERS = {"tetra": 4, "tetra10": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5,
-            "triangle": 3, "triangle6": 3, "quad": 4}
-_QUADRATIC = ("tetra10", "triangle6")
+# Built-in types, read from the element table (types registered later: elements.get).
+NODES_PER_CELL = {name: _types.get(name).n_nodes for name in _types.builtin()}
+SOLID_TYPES_3D = tuple(n for n in _types.builtin() if _types.get(n).dim == 3)
+SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2)
+# What generate_bar builds, by space dimension (a capability of the bar generator, not of the table).
+BAR_ELEMENTS = {3: ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed"),
+                2: ("triangle", "triangle6", "quad", "mixed")}
 
 # Cell data names that carry integer region tags, most specific first.
 _TAG_KEYS = ("gmsh:physical", "cell_tags", "medit:ref")
@@ -80,10 +87,11 @@ class CellBlock:
     tags: np.ndarray | None = None
 
     def __post_init__(self):
-        if self.type not in NODES_PER_CELL:
-            raise MeshError(f"unsupported cell type {self.type!r} (supported: {', '.join(NODES_PER_CELL)})")
+        try:
+            k = _types.get(self.type).n_nodes
+        except ValueError:
+            raise MeshError(f"unsupported cell type {self.type!r} (supported: {', '.join(_types.names())})") from None
         cells = np.asarray(self.cells)
-        k = NODES_PER_CELL[self.type]
         if cells.size == 0:
             cells = cells.reshape(0, k)
         if cells.ndim != 2 or cells.shape[1] != k:
@@ -140,7 +148,11 @@ def _offsets(mesh: Mesh) -> np.ndarray:
 
 
 def _topological_dim(cell_type: str) -> int | None:
-    """Dimension of any meshio cell type by its family name (None if unknown)."""
+    """Dimension of a registered element type, or of any meshio cell type by its family name (None if unknown)."""
+    try:
+        return _types.get(cell_type).dim
+    except ValueError:
+        pass
     for prefixes, d in ((("tetra", "hexahedron", "wedge", "pyramid", "polyhedron"), 3),
                         (("triangle", "quad", "polygon"), 2), (("line",), 1), (("vertex",), 0)):
         if cell_type.startswith(prefixes):
@@ -197,9 +209,9 @@ def read_mesh(path) -> Mesh:
     if unknown:
         raise MeshError(f"{path}: unknown cell type(s) {', '.join(unknown)}")
     dim = max(dims.values(), default=-1)
-    if dim < 2:
+    solid = _types.names(dim=dim)
+    if dim < 2 and not any(t in solid for t in dims):   # lower-dimensional cells of a registered type only
         raise MeshError(f"{path}: no 2D or 3D cells (found: {', '.join(sorted(dims)) or 'none'})")
-    solid = SOLID_TYPES_3D if dim == 3 else SOLID_TYPES_2D
     bad = sorted(t for t, d in dims.items() if d == dim and t not in solid)
     if bad:
         raise MeshError(f"{path}: unsupported {dim}D cell type(s) {', '.join(bad)} "
@@ -242,6 +254,8 @@ def _points_for_dim(points, dim, path):
     """3D meshes need 3 coordinates; 2D meshes stored with z == 0 lose z."""
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise MeshError(f"{path}: points have shape {points.shape}")
+    if dim < 2:                                 # bars, ...: as many coordinates as the file has
+        return points
     if dim == 3:
         if points.shape[1] != 3:
             raise MeshError(f"{path}: 3D cells but {points.shape[1]}D points")
@@ -278,20 +292,6 @@ def to_meshio(mesh: Mesh, pad_to_3d: bool = False, tag_name: str = "cell_tags"):
 # points (corners, then the centroid): J[cell, q] = X[cell]^T G[q] and det J > 0
 # means correctly oriented.
 
-_REF_CORNERS = {
-    "tetra": [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)],
-    "hexahedron": [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1),
-                   (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)],
-    "wedge": [(0, 0, -1), (0, 1, -1), (1, 0, -1), (0, 0, 1), (0, 1, 1), (1, 0, 1)],
-    "triangle": [(0, 0), (1, 0), (0, 1)],
-    "quad": [(-1, -1), (1, -1), (1, 1), (-1, 1)],
-}
-_REF_CORNERS["tetra10"] = _REF_CORNERS["tetra"]
-_REF_CORNERS["triangle6"] = _REF_CORNERS["triangle"]
-_SIMPLEX_EDGES = {"tetra10": [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)],
-                  "triangle6": [(0, 1), (1, 2), (2, 0)]}
-
-
 def _grad_simplex(xi, quadratic_edges=None):
     """Gradients (k, r) of linear or (VTK-ordered) quadratic simplex shape functions."""
     r = len(xi)
@@ -326,7 +326,22 @@ def _grad_wedge(xi):
     return g
 
 
-def _pyramid_table():
+def _grad_lagrange(el: ElementType, xi) -> np.ndarray:
+    """Gradients (k, r) of any Lagrange element on a polynomial domain (the numeric Vandermonde way):
+    element types without a closed form below (hexahedron27, wedge15, ...) get their tables from here."""
+    E = np.array(monomial_exponents(el.domain, el.dim, el.order), dtype=float)      # (m, r)
+    X = np.array(el.nodes, dtype=float)                                           # (k, r)
+    C = np.linalg.inv(np.prod(X[:, None, :] ** E[None], axis=2))                  # (m, k): N_i = sum_m phi_m C[m, i]
+    x = np.asarray(xi, dtype=float)
+    dphi = np.empty(E.shape)
+    for r in range(E.shape[1]):
+        P = x ** E
+        P[:, r] = np.where(E[:, r] > 0, E[:, r] * x[r] ** np.maximum(E[:, r] - 1, 0), 0.0)
+        dphi[:, r] = np.prod(P, axis=1)
+    return C.T @ dphi
+
+
+def _pyramid_table(el: ElementType):
     """Pyramid det J samples (the rational map's Jacobian reduces to linear forms).
 
     With x = (1-z) B(x/(1-z), y/(1-z)) + z x_apex (B the bilinear base), det J at
@@ -334,7 +349,7 @@ def _pyramid_table():
     det[B_u(a), B_v(a), x_apex - x_a]; at the centroid (0,0,1/4) it is
     det[B_u(0), B_v(0), x_apex - B(0)].
     """
-    base = np.array(_REF_CORNERS["quad"], float)
+    base = np.array([p[:2] for p in el.corner_nodes[:4]], float)
     rows = []
     for a, uv in enumerate(list(base) + [np.zeros(2)]):
         g = np.zeros((5, 3))
@@ -348,20 +363,26 @@ def _pyramid_table():
     return np.array(rows)
 
 
-def _gradient_table(cell_type: str) -> np.ndarray:
-    if cell_type == "pyramid":
-        return _pyramid_table()
-    corners = np.array(_REF_CORNERS[cell_type], float)
+@functools.cache
+def _gradient_table(el: ElementType) -> np.ndarray:
+    """Closed forms by reference domain (and order); any other Lagrange element numerically."""
+    if el.domain == PYRAMID:
+        if el.n_nodes != 5:
+            raise MeshError(f"{el.name}: no gradient table for a {el.n_nodes}-node pyramid")
+        return _pyramid_table(el)
+    corners = np.array(el.corner_nodes, float)
     samples = list(corners) + [corners.mean(axis=0)]
-    if cell_type in ("tetra", "triangle", "tetra10", "triangle6"):
-        edges = _SIMPLEX_EDGES.get(cell_type)
+    if el.domain == SIMPLEX and el.order <= 2 and len(el.midside_edges) == el.n_nodes - el.n_corners:
+        edges = el.midside_edges or None
         return np.array([_grad_simplex(x, edges) for x in samples])
-    if cell_type == "wedge":
+    if el.domain == PRISM and el.order == 1:
         return np.array([_grad_wedge(x) for x in samples])
-    return np.array([_grad_tensor(x, corners) for x in samples])
+    if el.domain == BOX and el.order == 1:
+        return np.array([_grad_tensor(x, corners) for x in samples])
+    return np.array([_grad_lagrange(el, x) for x in samples])
 
 
-_GRAD = {t: _gradient_table(t) for t in NODES_PER_CELL}
+_GRAD = {t: _gradient_table(_types.get(t)) for t in NODES_PER_CELL}
 
 
 def _det(J: np.ndarray) -> np.ndarray:
@@ -374,14 +395,22 @@ def _det(J: np.ndarray) -> np.ndarray:
 
 
 def _sample_dets(points: np.ndarray, block: CellBlock) -> np.ndarray:
-    """det J at the corners and the centroid of every cell: (n, q)."""
+    """det J at the corners and the centroid of every cell: (n, q).
+
+    Cells of a lower topological dimension r < d have no orientation: their
+    measure sqrt(det(J^T J)) (length, area) instead, never negative."""
+    el = _types.get(block.type)
     X = points[block.cells]                                  # (n, k, d)
-    J = np.einsum("nkd,qkr->nqdr", X, _GRAD[block.type], optimize=True)
-    return _det(J)
+    J = np.einsum("nkd,qkr->nqdr", X, _gradient_table(el), optimize=True)
+    if el.dim == points.shape[1]:
+        return _det(J)
+    G = np.einsum("nqdr,nqds->nqrs", J, J)
+    gram = G[..., 0, 0] if el.dim == 1 else _det(G)
+    return np.sqrt(np.maximum(gram, 0.0))
 
 
 def _cell_size(points: np.ndarray, block: CellBlock) -> np.ndarray:
-    X = points[block.cells[:, :_CORNERS[block.type]]]
+    X = points[block.cells[:, :_types.get(block.type).n_corners]]
     return np.linalg.norm(X.max(axis=1) - X.min(axis=1), axis=1)
 
 
@@ -390,34 +419,14 @@ def _cell_size(points: np.ndarray, block: CellBlock) -> np.ndarray:
 # Faces (edges in 2D) in outward order for a positively oriented cell, corners
 # only; quadratic midside nodes are looked up separately.
 
-_FACES = {
-    "tetra": [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)],
-    "hexahedron": [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)],
-    "wedge": [(0, 1, 2), (3, 5, 4), (0, 3, 4, 1), (0, 2, 5, 3), (1, 4, 5, 2)],
-    "pyramid": [(0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
-    "triangle": [(0, 1), (1, 2), (2, 0)],
-    "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
-}
-_FACES["tetra10"] = _FACES["tetra"]
-_FACES["triangle6"] = _FACES["triangle"]
-
-
-def _midside(cell_type: str, a: int, b: int) -> int:
-    """Local index of the midside node of corner edge (a, b) of a quadratic simplex."""
-    for m, e in enumerate(_SIMPLEX_EDGES[cell_type]):
-        if set(e) == {a, b}:
-            return _CORNERS[cell_type] + m
-    raise KeyError((cell_type, a, b))
-
-
-def _face_with_midsides(cell_type: str, face) -> tuple:
-    """Local face nodes incl. midsides (triangle6 / line3 order) for quadratic cells."""
-    if cell_type not in _QUADRATIC:
-        return tuple(face)
-    if len(face) == 2:
-        return tuple(face) + (_midside(cell_type, *face),)
-    n = len(face)
-    return tuple(face) + tuple(_midside(cell_type, face[i], face[(i + 1) % n]) for i in range(n))
+def _solid_blocks(mesh: Mesh) -> list:
+    """(index, block, ElementType) of the blocks whose topological dimension is the space dimension."""
+    out = []
+    for bi, blk in enumerate(mesh.blocks):
+        el = _types.get(blk.type)
+        if el.dim == mesh.dim:
+            out.append((bi, blk, el))
+    return out
 
 
 @dataclass
@@ -451,13 +460,17 @@ def _face_table(mesh: Mesh) -> _FaceTable:
     width = 4 if mesh.dim == 3 else 2
     off = _offsets(mesh)
     parts = []
-    for bi, blk in enumerate(mesh.blocks):
+    for bi, blk, el in _solid_blocks(mesh):
         n = len(blk)
-        for fi, face in enumerate(_FACES[blk.type]):
+        for fi, f in enumerate(el.faces):
+            face = f.corners
             rows = np.full((n, width), -1, dtype=np.int64)
             rows[:, :len(face)] = blk.cells[:, face]
             parts.append((rows, np.full(n, len(face)), off[bi] + np.arange(n), np.full(n, bi),
-                          np.arange(n), np.full(n, fi), np.full(n, blk.type in _QUADRATIC)))
+                          np.arange(n), np.full(n, fi), np.full(n, el.quadratic)))
+    if not parts:
+        e = np.zeros(0, np.int64)
+        return _FaceTable(np.zeros((0, width), np.int64), e, e, e, e, e, e.astype(bool), e, e, e)
     cols = [np.concatenate(c) for c in zip(*parts)]
     nodes = cols[0]
     order, gid, count = _group_rows(np.sort(nodes, axis=1))
@@ -482,9 +495,30 @@ def boundary_faces(mesh: Mesh) -> list:
     out = []
     for r in _boundary_rows(ft):
         blk = mesh.blocks[ft.block[r]]
-        local = _face_with_midsides(blk.type, _FACES[blk.type][ft.lface[r]])
+        local = _types.get(blk.type).faces[ft.lface[r]].nodes
         out.append((int(ft.block[r]), int(ft.local[r]), tuple(int(v) for v in blk.cells[ft.local[r], list(local)])))
     return out
+
+
+@functools.cache
+def _face_corner_counts(dim: int, types: tuple) -> dict:
+    """{node count: corner count} of the face types of the registered dim-dimensional element types."""
+    return {len(f.nodes): len(f.corners) for t in types for f in _types.get(t).faces
+            if _types.get(t).dim == dim}
+
+
+def face_measure(points, nodes, dim) -> float:
+    """Area of a boundary face of a dim-dimensional cell (length of an edge in 2D) from its corners.
+
+    `nodes` as boundary_faces gives them (the face type's order, corners first); the face type
+    follows from the node count among the faces of the element table."""
+    k = _face_corner_counts(dim, _types.names()).get(len(nodes), len(nodes))
+    corners = points[np.asarray(nodes)[:k]]
+    if k == 2:
+        return float(np.linalg.norm(corners[1] - corners[0]))
+    if k == 3:
+        return 0.5 * float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[2] - corners[0])))
+    return 0.5 * float(np.linalg.norm(np.cross(corners[2] - corners[0], corners[3] - corners[1])))
 
 
 # --------------------------------------------------------------------------- checks
@@ -504,6 +538,9 @@ def check_mesh(mesh: Mesh) -> None:
     """
     _check_structure(mesh)
     _check_jacobians(mesh)
+    if not _solid_blocks(mesh):     # only lower-dimensional cells (bars in 3D, ...): no faces to match
+        _check_midsides(mesh)
+        return
     ft = _face_table(mesh)
     _check_shared_faces(mesh, ft)
     _check_midsides(mesh)
@@ -514,8 +551,7 @@ def check_mesh(mesh: Mesh) -> None:
 def _check_structure(mesh: Mesh) -> None:
     if mesh.n_cells == 0:
         raise MeshError("mesh has no cells")
-    allowed = SOLID_TYPES_3D if mesh.dim == 3 else SOLID_TYPES_2D
-    wrong = sorted({b.type for b in mesh.blocks if b.type not in allowed})
+    wrong = sorted({b.type for b in mesh.blocks if mesh.dim not in _types.get(b.type).space_dims})
     if wrong:
         raise MeshError(f"cell type(s) {', '.join(wrong)} do not fit a {mesh.dim}D mesh")
     check_coordinates(mesh.points)
@@ -567,7 +603,7 @@ def _check_jacobians(mesh: Mesh) -> None:
     inverted, degenerate = [], []
     for bi, blk in enumerate(mesh.blocks):
         dets = _sample_dets(mesh.points, blk)
-        tol = _DET_TOL * _cell_size(mesh.points, blk) ** mesh.dim
+        tol = _DET_TOL * _cell_size(mesh.points, blk) ** _types.get(blk.type).dim
         lo = dets.min(axis=1)
         inverted.append(off[bi] + np.flatnonzero(lo < -tol))
         degenerate.append(off[bi] + np.flatnonzero((lo >= -tol) & (lo <= tol)))
@@ -639,10 +675,9 @@ def _check_midsides(mesh: Mesh) -> None:
     keys, mids, cells = [], [], []
     off = _offsets(mesh)
     for bi, blk in enumerate(mesh.blocks):
-        if blk.type not in _QUADRATIC:
-            continue
-        nc = _CORNERS[blk.type]
-        for m, (p, q) in enumerate(_SIMPLEX_EDGES[blk.type]):
+        el = _types.get(blk.type)
+        nc = el.n_corners
+        for m, (p, q) in enumerate(el.midside_edges):
             keys.append(np.sort(blk.cells[:, [p, q]], axis=1))
             mids.append(blk.cells[:, nc + m])
             cells.append(off[bi] + np.arange(len(blk)))
@@ -796,15 +831,6 @@ def _inside_2d(points, F, nv, P, normal):
 
 # --------------------------------------------------------------------------- orientation fix
 
-# Node permutations that mirror each reference element onto itself
-# (swap xi<->eta for simplices, pyramid and quad; zeta -> -zeta for hex, wedge).
-_MIRROR = {
-    "tetra": [0, 2, 1, 3], "tetra10": [0, 2, 1, 3, 6, 5, 4, 7, 9, 8],
-    "hexahedron": [4, 5, 6, 7, 0, 1, 2, 3], "wedge": [3, 4, 5, 0, 1, 2], "pyramid": [0, 3, 2, 1, 4],
-    "triangle": [0, 2, 1], "triangle6": [0, 2, 1, 5, 4, 3], "quad": [0, 3, 2, 1],
-}
-
-
 def orient_cells(mesh: Mesh) -> Mesh:
     """A copy with mirrored cells renumbered so that det J > 0.
 
@@ -818,7 +844,7 @@ def orient_cells(mesh: Mesh) -> Mesh:
     for blk in mesh.blocks:
         cells = blk.cells.copy()
         flip = np.all(_sample_dets(mesh.points, blk) < 0, axis=1)
-        cells[flip] = cells[flip][:, _MIRROR[blk.type]]
+        cells[flip] = cells[flip][:, list(_types.get(blk.type).flip)]
         blocks.append(CellBlock(blk.type, cells, None if blk.tags is None else blk.tags.copy()))
     return Mesh(mesh.points.copy(), blocks)
 
@@ -945,14 +971,14 @@ def _bar_3d(size, cells, origin, element):
     if element in ("tetra", "tetra10"):
         tets = hexes[:, _KUHN].reshape(-1, 4)
         if element == "tetra10":
-            points, tets = _add_midsides(points, tets, _SIMPLEX_EDGES["tetra10"])
+            points, tets = _add_midsides(points, tets, _types.get("tetra10").midside_edges)
         return Mesh(points, [CellBlock(element, tets)])
     if element == "wedge":
         return Mesh(points, [CellBlock("wedge", hexes[:, _WEDGE_SPLIT].reshape(-1, 6))])
     if element == "pyramid":
         points, centres = _add_centres(points, hexes)
         return Mesh(points, [CellBlock("pyramid", _pyramids(hexes, centres))])
-    raise MeshError(f"unknown 3D element {element!r} (hexahedron, tetra, tetra10, wedge, pyramid, mixed)")
+    raise MeshError(f"unknown 3D element {element!r} ({', '.join(BAR_ELEMENTS[3])})")
 
 
 def _bar_2d(size, cells, origin, element):
@@ -969,7 +995,7 @@ def _bar_2d(size, cells, origin, element):
     if element in ("triangle", "triangle6"):
         tris = quads[:, tri_split].reshape(-1, 3)
         if element == "triangle6":
-            points, tris = _add_midsides(points, tris, _SIMPLEX_EDGES["triangle6"])
+            points, tris = _add_midsides(points, tris, _types.get("triangle6").midside_edges)
         return Mesh(points, [CellBlock(element, tris)])
     if element == "mixed":
         if cells[0] < 2:
@@ -977,7 +1003,7 @@ def _bar_2d(size, cells, origin, element):
         half = cells[0] // 2
         return Mesh(points, [CellBlock("quad", grid[:half].reshape(-1, 4)),
                              CellBlock("triangle", grid[half:].reshape(-1, 4)[:, tri_split].reshape(-1, 3))])
-    raise MeshError(f"unknown 2D element {element!r} (triangle, triangle6, quad, mixed)")
+    raise MeshError(f"unknown 2D element {element!r} ({', '.join(BAR_ELEMENTS[2])})")
 
 
 def generate_bar(size=(1.0, 0.2, 0.2), cells=(10, 2, 2), element="hexahedron", origin=None) -> Mesh:
@@ -1051,7 +1077,7 @@ def _bar_counts_3d(cells, element, grid, hexes):
         counts = {"hexahedron": s[0] * column, "wedge": 2 * s[1] * column,
                   "pyramid": (6 * (s[2] - 1) + 5) * column, "tetra": (2 + 6 * s[3]) * column}
         return counts, grid + s[2] * column
-    raise MeshError(f"unknown 3D element {element!r} (hexahedron, tetra, tetra10, wedge, pyramid, mixed)")
+    raise MeshError(f"unknown 3D element {element!r} ({', '.join(BAR_ELEMENTS[3])})")
 
 
 def _bar_counts_2d(cells, element, grid, quads):
@@ -1067,4 +1093,4 @@ def _bar_counts_2d(cells, element, grid, quads):
             raise MeshError("element='mixed' needs at least 2 cells along x")
         half = nx // 2
         return {"quad": half * ny, "triangle": 2 * (nx - half) * ny}, grid
-    raise MeshError(f"unknown 2D element {element!r} (triangle, triangle6, quad, mixed)")
+    raise MeshError(f"unknown 2D element {element!r} ({', '.join(BAR_ELEMENTS[2])})")

@@ -22,6 +22,7 @@ from . import resources
 from .errors import ElementError, TensormassError
 from .integrators import outputs_for
 from .mesh import Mesh, boundary_faces, check_mesh
+from .mesh import face_measure as _face_measure  # face types: the element table
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, switch_parameters)
 from .scene import Loads, Output, Solver
@@ -363,15 +364,3 @@ class Model:
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
         return {name: U[node].tolist() for name, node in self.probes.items()}
-
-
-def _face_measure(points, nodes, dim) -> float:
-    """Area of a boundary face (length of an edge in 2D) from its corners."""
-    n = len(nodes)
-    if dim == 2:
-        a, b = points[nodes[0]], points[nodes[1]]
-        return float(np.linalg.norm(b - a))
-    corners = points[nodes[:3] if n in (3, 6) else nodes[:4]]
-    if len(corners) == 3:
-        return 0.5 * float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[2] - corners[0])))
-    return 0.5 * float(np.linalg.norm(np.cross(corners[2] - corners[0], corners[3] - corners[1])))

@@ -97,16 +97,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import elements as _types
 from .mesh import CellBlock, Mesh, MeshError
 
 __all__ = ["Refinement", "refine", "interpolate_nodal", "REFINABLE_TYPES"]
 
-REFINABLE_TYPES = ("triangle", "tetra")
+# Types whose table entry defines a refinement pattern (longest-edge bisection of linear simplices).
+REFINABLE_TYPES = tuple(sorted((n for n in _types.builtin() if _types.get(n).refinement == "bisection"),
+                              key=lambda n: _types.get(n).dim))     # 2D first: "triangle and tetra"
 
-_EDGES = {
-    "triangle": np.array([(0, 1), (1, 2), (2, 0)]),
-    "tetra": np.array([(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)]),
-}
+_EDGES = {t: np.array(_types.get(t).edges) for t in REFINABLE_TYPES}
 # mantissa bits kept when comparing lengths: ~1e-10 relative
 _LENGTH_BITS = 32
 
@@ -336,7 +336,7 @@ class _Bisector:
                     raise MeshError("longest-edge propagation did not terminate (degenerate cells?)")
 
 
-_EDGE_PAIRS = {3: [tuple(e) for e in _EDGES["triangle"].tolist()], 4: [tuple(e) for e in _EDGES["tetra"].tolist()]}
+_EDGE_PAIRS = {_types.get(t).n_nodes: [tuple(e) for e in _EDGES[t].tolist()] for t in REFINABLE_TYPES}
 
 
 def _frozen_edges(mesh) -> frozenset:

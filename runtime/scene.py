@@ -61,10 +61,11 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .. import elements as _element_types
 from .. import laws
 from ..generator.catalogue import entries
 from .errors import SceneError
-from .mesh import COORD_MAX
+from .mesh import BAR_ELEMENTS, COORD_MAX
 from .regions import (assign_materials as _assign_materials, box_contains, box_tolerance, prescribed_values,
                       reachable_laws, switch_applies, switch_parameters)
 from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, check_against_mesh
@@ -303,9 +304,9 @@ LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
 BACKENDS = ("numba", "c")
 GENERATORS = ("bar",)
-ELEMENTS_3D = ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed")
-ELEMENTS_2D = ("triangle", "triangle6", "quad", "mixed")
-CELL_TYPES = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
+ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
+ELEMENTS_2D = BAR_ELEMENTS[2]
+CELL_TYPES = _element_types.names()     # every registered element type (tensormass.elements)
 
 
 def _type_name(value) -> str:
@@ -475,7 +476,7 @@ class _Parser:
         if "size" in t:
             size = self.vector(t["size"], "mesh.size")
         else:
-            size = (1.0, 0.2) if element in ("triangle", "triangle6", "quad") else (1.0, 0.2, 0.2)
+            size = (1.0, 0.2) if element in _element_types.names(dim=2) else (1.0, 0.2, 0.2)
         self.dim = len(size)
         if element is None:                 # default: hexahedron, or quad for a 2D size
             element = "hexahedron" if self.dim == 3 else "quad"

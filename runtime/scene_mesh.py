@@ -15,11 +15,13 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .. import elements as _element_types
 from ..generator.catalogue import entries, quadratures
 from . import resources
 from .errors import SceneError, TensormassError
 from . import mesh as _mesh          # module attribute lookups: tests stand in for read_mesh, generate_bar
 from .mesh import MeshError, check_coordinates
+from .refine import REFINABLE_TYPES
 from .regions import (assign_materials, box_contains, box_tolerance, check_unused_materials, prescribed_values,
                       reachable_laws, switch_parameters)
 
@@ -79,7 +81,7 @@ def build_mesh(spec):
     if spec.file:
         mesh = _mesh.read_mesh(spec.file)
     elif spec.generate in (None, "bar"):
-        dim = 2 if spec.element in ("triangle", "triangle6", "quad") or len(spec.cells) == 2 else 3
+        dim = 2 if spec.element in _element_types.names(dim=2) or len(spec.cells) == 2 else 3
         bar = SimpleNamespace(size=tuple(spec.size)[:dim], cells=tuple(spec.cells)[:dim], element=spec.element)
         resources.check(resources.estimate(resources.MeshCounts.of_bar(bar)), what="the generated bar")
         mesh = _mesh.generate_bar(tuple(spec.size)[:dim], tuple(spec.cells)[:dim], spec.element,
@@ -208,7 +210,7 @@ def _check_adapt(scene, mesh, which) -> None:
     for r, rule in enumerate(scene.adapt):
         key = f"adapt[{r}]"
         if rule.action == "refine":
-            bad = sorted({b.type for b in mesh.blocks} - {"triangle", "tetra"})
+            bad = sorted({b.type for b in mesh.blocks} - set(REFINABLE_TYPES))
             if bad:
                 raise SceneError(f"{key}.action: refine splits triangle and tetra cells only; the mesh has {bad[0]}")
             continue
