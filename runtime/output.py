@@ -48,12 +48,15 @@ such a summary: the scene file, frames, the .pvd, symbolic links, devices.
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
 import re
+import signal
 import stat
 import tempfile
+import threading
 from pathlib import Path
 from xml.sax.saxutils import quoteattr, unescape
 
@@ -390,6 +393,10 @@ class Writer:
             m.cell_data["health_warning"] = [np.ones(len(b), dtype=np.uint8) for b in self.mesh.blocks]
         if not self.frames and not self._pvd_written:
             self._start()
+        with _interrupts_deferred():              # the frame and its .pvd line land together
+            return self._commit_frame(m, step, time, flag)
+
+    def _commit_frame(self, m, step, time, flag) -> Path:
         target = self.frame_path(step)
         self._write_vtu(m, target)
         lines = [] if flag is None else [(None, xml_comment(f"health warning (step {int(step)}): {flag}"))]
@@ -592,6 +599,34 @@ class Writer:
         if self.mesh.dim == 2 and arr.ndim == 2 and arr.shape[1] == 2:
             return np.column_stack([arr, np.zeros(len(arr), dtype=arr.dtype)])
         return arr
+
+
+@contextlib.contextmanager
+def _interrupts_deferred():
+    """Hold Ctrl-C until the block is done, then deliver it.
+
+    A frame is renamed into place and then listed in the .pvd: an interrupt between the two
+    would leave a frame no .pvd lists. Writing one frame takes milliseconds, so SIGINT waits
+    for the block (main thread only: signal handlers live there) and is then handed to the
+    handler that was in place, as if it had arrived just after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(frame))
+    except ValueError:                            # not the main interpreter: nothing to hold
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            if callable(previous):
+                previous(signal.SIGINT, caught[0])
+            elif previous == signal.SIG_DFL:
+                raise KeyboardInterrupt
 
 
 def _remove_quietly(path) -> None:
