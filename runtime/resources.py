@@ -56,6 +56,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .. import elements as _elements
 from .. import generated
 from .errors import TensormassError
 from .mesh import bar_counts
@@ -94,11 +95,16 @@ BAND_WIDTH = 1.25
 # meshes of random points (unstructured tetrahedra 16.4, tetra10 29.4, triangles 7.0).
 PAIRS_PER_NODE = {"hexahedron": 27, "tetra": 17, "tetra10": 30, "wedge": 21, "pyramid": 19,
                   "quad": 9, "triangle": 7, "triangle6": 12}
+# An element type without a measured entry (added to elements/ since): a node is shared by a
+# few cells, each linking it to all its nodes; 3 x nodes per cell bounds the measured ones.
+PAIRS_PER_NODE_DEFAULT = 3
 # Cells per grid box (to count cell layers in a file mesh from its bounding box).
 CELLS_PER_BOX = {"hexahedron": 1, "tetra": 6, "tetra10": 6, "wedge": 2, "pyramid": 6,
                  "quad": 1, "triangle": 2, "triangle6": 2}
-NODES_PER_CELL = {"tetra": 4, "tetra10": 10, "hexahedron": 8, "wedge": 6, "pyramid": 5,
-                  "triangle": 3, "triangle6": 6, "quad": 4}
+# Node counts come from the element table (light: no sympy, no numba), also for types
+# registered after import.
+def _nodes(cell_type: str) -> int:
+    return _elements.get(cell_type).n_nodes
 # Simulation keeps at most simulation.HISTORY_MAX rows (a test checks they agree); a row
 # is 7 Python numbers (32 B each), once in the history and once in the summary dict.
 HISTORY_ROWS = 4096
@@ -313,8 +319,19 @@ def _entry(element, law, quadrature) -> dict:
         return entry
     same = [e for (el, _, _), e in table.items() if el == element]
     if not same:
-        raise TensormassError(f"no kernel for element {element!r} in the catalogue")
+        return _uncatalogued_entry(element)
     return max(same, key=lambda e: e["constants"])
+
+
+def _uncatalogued_entry(element) -> dict:
+    """A rough entry for an element type with no kernel in the catalogue (added to elements/,
+    generated on first use): one integration point per node, the constants layout the
+    generator uses (per point: weight x det J, then a shape gradient per node), and op counts
+    scaled like the catalogue's (f+K ~ 4 nd^2 per point, forces ~ 20 nd, energy ~ 60)."""
+    el = _elements.get(element)
+    points, nd = el.n_nodes, el.n_nodes * el.dim
+    per_point = {"energy": 60, "forces": 20 * nd, "stiffness": 4 * nd * nd, "forces_and_stiffness": 4 * nd * nd}
+    return {"constants": points * (1 + nd) + 8, "ops": {k: points * v for k, v in per_point.items()}}
 
 
 def _laws(material, adapt) -> list:
@@ -418,7 +435,7 @@ def _refined(counts: MeshCounts, adapt) -> MeshCounts:
     rounds = sum(r.rounds for r in adapt if r.action == "refine")
     if not rounds:
         return counts
-    grow = {t: (int(n * REFINE_CELLS ** rounds) if t in ("triangle", "tetra") else n)
+    grow = {t: (int(n * REFINE_CELLS ** rounds) if _elements.get(t).refinement else n)
             for t, n in counts.cells.items()}
     nodes = int(counts.nodes * REFINE_NODES ** rounds)
     return MeshCounts(counts.dim, nodes, grow, counts.layers * REFINE_CELLS ** (rounds / counts.dim))
@@ -437,7 +454,7 @@ class _Estimator:
         self.projection = False
         kernels = set()
         for t, n in counts.cells.items():
-            k = NODES_PER_CELL[t]
+            k = _nodes(t)
             constants, ops, found = _per_type(t, materials, adapt, self.output)
             kernels |= found
             self.entries += n * (k * dim) ** 2
@@ -447,8 +464,9 @@ class _Estimator:
         self.kernels = max(len(kernels), 1)
         self.projection = solver.project_psd is not False and any(
             law != "hooke" for m in materials for law in _laws(m, adapt))
-        pairs = max((PAIRS_PER_NODE[t] for t in counts.cells), default=1)
-        within = sum(n * NODES_PER_CELL[t] ** 2 for t, n in counts.cells.items())
+        pairs = max((PAIRS_PER_NODE.get(t, PAIRS_PER_NODE_DEFAULT * _nodes(t)) for t in counts.cells),
+                    default=1)
+        within = sum(n * _nodes(t) ** 2 for t, n in counts.cells.items())
         self.nnz = dim * dim * min(counts.nodes * pairs, within)
         self.kd = int(math.ceil(BAND_WIDTH * dim * counts.nodes / max(counts.layers, 1.0)))
         self.linear = self._linear()

@@ -303,3 +303,10 @@ def test_a_new_type_needs_only_its_table_entry(quad9):
     cells[1, 7] = 15                        # the second cell's own copy of the shared midside node (1, 0.5)
     with pytest.raises(MeshError, match="midside"):
         check_mesh(Mesh(np.vstack([m.points, [[1.0, 0.5]]]), [CellBlock("quad9", cells)]))
+
+
+def test_a_new_type_gets_a_resource_estimate(quad9):
+    """The resource estimate reads node counts from the table too: no table of its own to extend."""
+    from tensormass.runtime import resources
+    est = resources.estimate(resources.MeshCounts.of_mesh(_quad9_mesh()))
+    assert est.bytes > 0 and est.nodes == 15 and est.cells == {"quad9": 2}
