@@ -1,9 +1,9 @@
-"""Replay the adversarial suite (tests/adversarial_cases.py) and print the README table.
+"""Replay the adversarial suite (tests/apps/adversarial_cases.py) and print the README table.
 
-    python tests/adversarial_table.py                 # every case: the table, per family, failures
-    python tests/adversarial_table.py --json F        # also the counts and every case's outcome as JSON
-    python tests/adversarial_table.py --case NAME     # replay one case and describe how it ended
-    python tests/adversarial_table.py --family run    # only one family
+    python tests/apps/adversarial_table.py                 # every case: the table, per family, failures
+    python tests/apps/adversarial_table.py --json F        # also the counts and every case's outcome as JSON
+    python tests/apps/adversarial_table.py --case NAME     # replay one case and describe how it ended
+    python tests/apps/adversarial_table.py --family run    # only one family
 
 Exit code 0 when every case met its expectation, 1 otherwise (the failures are listed).
 """

@@ -1,9 +1,9 @@
-"""The adversarial suite of issue #10: every input of tests/adversarial_cases.py, replayed through
+"""The adversarial suite of issue #10: every input of tests/apps/adversarial_cases.py, replayed through
 the real command line in-process, must meet its expectation (a clear error, an untrusted run
 reported as such, warnings, a sane result, or a clean interruption) with no crash, no traceback,
 no silent wrong answer and no half-written output.
 
-`python tests/adversarial_table.py` replays the same cases and prints the README table.
+`python tests/apps/adversarial_table.py` replays the same cases and prints the README table.
 """
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ bytes, a mesh described as points + cells + damage, folders, links, fifos), envi
 variables, earlier runs (an old summary, old frames, a compiled library to corrupt), and
 "hooks": faults injected into the process (a folder that refuses writes, a full disk, Ctrl-C
 at a given call or once a given frame exists).  Nothing in a case is code, so a case can be
-printed, stored and replayed alone (``python tests/adversarial_table.py --case NAME``).
+printed, stored and replayed alone (``python tests/apps/adversarial_table.py --case NAME``).
 
 Expectations (what the issue demands of every input):
 

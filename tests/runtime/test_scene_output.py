@@ -21,7 +21,7 @@ from tensormass.runtime.mesh import generate_bar, to_meshio
 from tensormass.runtime.output import Writer
 from tensormass.runtime.scene import Scene, SceneError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
 HAVE_SIMULATION = (ROOT / "runtime" / "simulation.py").exists()
 
