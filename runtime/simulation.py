@@ -21,6 +21,7 @@ from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, 
 from .health import HealthMonitor
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
+from .refine import interpolate_nodal
 
 __all__ = ["Simulation", "Summary"]
 
@@ -258,7 +259,6 @@ class Simulation:
 
     def _rebuild(self, model, parents) -> None:
         """Carry the state and the counters over to a refined model (new pattern, masses, constants)."""
-        from .refine import interpolate_nodal
         old, dim = self.ctx, model.dim
         ctx = Context(model)
         model.warm_up()
