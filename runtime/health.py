@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .. import laws
 from .errors import InvertedElementError, TensormassError
 
 __all__ = ["HealthMonitor", "Check", "min_det_F", "safe_norm", "MAX_ENERGY_SCALE"]
@@ -63,49 +64,6 @@ def safe_norm(x: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _min_det_3d(D, cells, U, n_points, stride, out):
-    """out[e] = min over points q of det(I + sum_i u_i (x) G_qi); G_qi at D[e, q*stride + 1 + 3i]."""
-    for e in range(cells.shape[0]):
-        low = np.inf
-        for q in range(n_points):
-            b = q * stride + 1
-            f00 = 1.0; f01 = 0.0; f02 = 0.0                       # noqa: E702
-            f10 = 0.0; f11 = 1.0; f12 = 0.0                       # noqa: E702
-            f20 = 0.0; f21 = 0.0; f22 = 1.0                       # noqa: E702
-            for i in range(cells.shape[1]):
-                n = cells[e, i]
-                gx, gy, gz = D[e, b + 3 * i], D[e, b + 3 * i + 1], D[e, b + 3 * i + 2]
-                ux, uy, uz = U[n, 0], U[n, 1], U[n, 2]
-                f00 += ux * gx; f01 += ux * gy; f02 += ux * gz    # noqa: E702
-                f10 += uy * gx; f11 += uy * gy; f12 += uy * gz    # noqa: E702
-                f20 += uz * gx; f21 += uz * gy; f22 += uz * gz    # noqa: E702
-            det = (f00 * (f11 * f22 - f12 * f21) - f01 * (f10 * f22 - f12 * f20)
-                   + f02 * (f10 * f21 - f11 * f20))
-            if det < low:
-                low = det
-        out[e] = low
-
-
-@njit(cache=True)
-def _min_det_2d(D, cells, U, n_points, stride, out):
-    for e in range(cells.shape[0]):
-        low = np.inf
-        for q in range(n_points):
-            b = q * stride + 1
-            f00 = 1.0; f01 = 0.0; f10 = 0.0; f11 = 1.0          # noqa: E702
-            for i in range(cells.shape[1]):
-                n = cells[e, i]
-                gx, gy = D[e, b + 2 * i], D[e, b + 2 * i + 1]
-                ux, uy = U[n, 0], U[n, 1]
-                f00 += ux * gx; f01 += ux * gy                    # noqa: E702
-                f10 += uy * gx; f11 += uy * gy                    # noqa: E702
-            det = f00 * f11 - f01 * f10
-            if det < low:
-                low = det
-        out[e] = low
-
-
-@njit(cache=True)
 def _spread(U):
     """Largest distance of a node's displacement from the mean displacement (one pass each)."""
     n, dim = U.shape
@@ -126,19 +84,13 @@ def _spread(U):
 
 def part_min_det_F(model, part, u: np.ndarray) -> np.ndarray | None:
     """min det F per active element of a part; None for kernels without stored shape gradients."""
-    k = part.kernel
-    if getattr(k, "recompute", False):
+    if getattr(part.kernel, "recompute", False):
         return None
-    out = np.empty(part.n_active)
-    U = np.ascontiguousarray(u.reshape(model.n_points, model.dim))
-    fn = _min_det_3d if model.dim == 3 else _min_det_2d
-    fn(part.D_active, part.cells_active, U, k.n_points, 1 + k.n_dofs, out)
-    return out
+    return part.kernel.min_det_F(part.D_active, model.element_displacements(part, u))
 
 
 def min_det_F(model, u: np.ndarray) -> tuple:
     """(smallest det F over every checked element, global ids of inverted cells whose law allows it)."""
-    from .. import laws
     low, inverted = np.inf, []
     for part in model.parts:
         if not part.n_active:

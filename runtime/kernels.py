@@ -17,6 +17,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from .. import laws
 from .cache import cache_dir, writable_cache_dir
@@ -130,23 +131,61 @@ class Kernel:
         self._check(flags, "forces_and_stiffness")
         return f, K
 
+    def min_det_F(self, D, u) -> np.ndarray:
+        """Smallest det F over the integration points of each element (any law)."""
+        if self.recompute:
+            raise TensormassError(f"{self}: min_det_F() needs precomputed shape gradients (constants='precompute')")
+        D, u = self._displacements(D, u)
+        out = np.empty(len(D))
+        (_min_det_3d if self.dim == 3 else _min_det_2d)(D, u, self.n_points, 1 + self.n_dofs, out)
+        return out
+
     def inverted(self, D, u) -> np.ndarray:
         """Boolean mask of elements whose det F <= 0 at some integration point (any law)."""
-        if self.recompute:
-            raise TensormassError(f"{self}: inverted() needs precomputed shape gradients (constants='precompute')")
-        D, u = self._displacements(D, u)
-        return _min_det_F(D, u, self.n_points, 1 + self.n_dofs, self.n_nodes, self.dim) <= 0.0
+        return ~(self.min_det_F(D, u) > 0.0)
 
 
-def _min_det_F(D, u, n_points, stride, n_nodes, dim):
-    """Smallest det F over the integration points of each element (numpy, vectorised)."""
-    n = len(D)
-    out = np.full(n, np.inf)
-    for q in range(n_points):
-        G = D[:, q * stride + 1:(q + 1) * stride].reshape(n, n_nodes, dim)
-        F = np.eye(dim) + np.einsum("eia,eib->eab", u, G)
-        out = np.minimum(out, np.linalg.det(F))
-    return out
+# min det F from the stored constants: per point q, D[e, q*stride] is the weight x det J and the
+# shape gradients G_qi follow, node-major; F = I + sum_i u_i (x) G_qi.  numba loops, not numpy:
+# implicit steps check every element after every step (laws undefined at det F <= 0, the health
+# monitor), and the einsum version allocated an (n, dim, dim) F per point.
+@njit(cache=True)
+def _min_det_3d(D, u, n_points, stride, out):
+    for e in range(D.shape[0]):
+        low = np.inf
+        for q in range(n_points):
+            b = q * stride + 1
+            f00 = 1.0; f01 = 0.0; f02 = 0.0                       # noqa: E702
+            f10 = 0.0; f11 = 1.0; f12 = 0.0                       # noqa: E702
+            f20 = 0.0; f21 = 0.0; f22 = 1.0                       # noqa: E702
+            for i in range(u.shape[1]):
+                gx, gy, gz = D[e, b + 3 * i], D[e, b + 3 * i + 1], D[e, b + 3 * i + 2]
+                ux, uy, uz = u[e, i, 0], u[e, i, 1], u[e, i, 2]
+                f00 += ux * gx; f01 += ux * gy; f02 += ux * gz    # noqa: E702
+                f10 += uy * gx; f11 += uy * gy; f12 += uy * gz    # noqa: E702
+                f20 += uz * gx; f21 += uz * gy; f22 += uz * gz    # noqa: E702
+            det = (f00 * (f11 * f22 - f12 * f21) - f01 * (f10 * f22 - f12 * f20)
+                   + f02 * (f10 * f21 - f11 * f20))
+            if not det >= low:             # NaN too: a non-finite state is never "not inverted"
+                low = det
+        out[e] = low
+
+
+@njit(cache=True)
+def _min_det_2d(D, u, n_points, stride, out):
+    for e in range(D.shape[0]):
+        low = np.inf
+        for q in range(n_points):
+            b = q * stride + 1
+            f00 = 1.0; f01 = 0.0; f10 = 0.0; f11 = 1.0          # noqa: E702
+            for i in range(u.shape[1]):
+                gx, gy = D[e, b + 2 * i], D[e, b + 2 * i + 1]
+                f00 += u[e, i, 0] * gx; f01 += u[e, i, 0] * gy    # noqa: E702
+                f10 += u[e, i, 1] * gx; f11 += u[e, i, 1] * gy    # noqa: E702
+            det = f00 * f11 - f01 * f10
+            if not det >= low:
+                low = det
+        out[e] = low
 
 
 @lru_cache(maxsize=None)

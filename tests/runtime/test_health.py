@@ -92,6 +92,24 @@ def test_energy_growth_stops_an_explicit_blow_up():
     assert stop.summary.health["max_energy_growth"] > 0
 
 
+def test_energy_check_alone_stops_growth_beyond_the_threshold():
+    # the explicit integrator has its own blow-up test; this one guards the balance by itself
+    from tensormass.runtime.health import HealthMonitor
+    model = Model.from_scene(bar(law="hooke", steps=1, extra="max_energy_growth = 10.0"))
+    ctx = Context(model)
+    monitor = HealthMonitor(ctx, dynamic=True, duration=1.0)
+    scale = monitor.energy_scale
+    assert scale > 0
+    monitor.start(ctx, {"elastic": 0.0, "kinetic": 0.0, "external_work": 0.0})
+    calm = monitor.check(ctx, 1, {"elastic": 9.0 * scale, "kinetic": 0.0, "external_work": 0.0})
+    assert calm.stop is None and monitor.max_growth == pytest.approx(9.0)
+    # work done by the loads pays for the energy: no growth of the balance
+    paid = monitor.check(ctx, 2, {"elastic": 50.0 * scale, "kinetic": 0.0, "external_work": 50.0 * scale})
+    assert paid.stop is None
+    blown = monitor.check(ctx, 3, {"elastic": 5.0 * scale, "kinetic": 6.0 * scale, "external_work": 0.0})
+    assert blown.stop is not None and "energy balance" in blown.stop
+
+
 def test_energy_balance_is_recorded_for_explicit_runs():
     model = Model.from_scene(bar(law="hooke", kind="explicit", steps=1))
     dt = stable_time_step(Context(model))
@@ -165,6 +183,15 @@ def test_min_det_F_agrees_with_the_kernels_inverted_flag():
     flagged = part.kernel.inverted(part.D_active, model.element_displacements(part, u))
     assert np.array_equal(np.sort(part.cell_ids[flagged]), cells)
     assert (low <= 0) == bool(flagged.any())
+    # an independent evaluation: F = I + sum_i u_i (x) G_qi with numpy, det per point, min per element
+    k, ue = part.kernel, model.element_displacements(part, u)
+    stride = 1 + k.n_dofs
+    dets = [np.linalg.det(np.eye(3) + np.einsum("eia,eib->eab", ue,
+                                                part.D[:, q * stride + 1:(q + 1) * stride].reshape(-1, k.n_nodes, 3)))
+            for q in range(k.n_points)]
+    reference = np.min(dets, axis=0)
+    np.testing.assert_allclose(k.min_det_F(part.D, ue), reference, rtol=1e-12, atol=1e-12)
+    assert low == pytest.approx(reference.min(), rel=1e-12)
 
 
 # --------------------------------------------------------------------------- item 3: infinite residual
