@@ -86,7 +86,7 @@ def part_min_det_F(model, part, u: np.ndarray) -> np.ndarray | None:
     """min det F per active element of a part; None for kernels without stored shape gradients."""
     if getattr(part.kernel, "recompute", False):
         return None
-    return part.kernel.min_det_F(part.D_active, model.element_displacements(part, u))
+    return part.kernel.min_det_F(part.D_active, u, cells=part.cells_active)
 
 
 def min_det_F(model, u: np.ndarray) -> tuple:

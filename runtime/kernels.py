@@ -131,18 +131,31 @@ class Kernel:
         self._check(flags, "forces_and_stiffness")
         return f, K
 
-    def min_det_F(self, D, u) -> np.ndarray:
-        """Smallest det F over the integration points of each element (any law)."""
+    def min_det_F(self, D, u, cells=None) -> np.ndarray:
+        """Smallest det F over the integration points of each element (any law).
+
+        u: element displacements (n_elem, n_nodes, dim); or, with cells (n_elem, n_nodes) node
+        ids, the global (n_points, dim) displacements, read through cells without gathering
+        them (the runtime's per-step checks: a gather costs 3x the loop itself)."""
         if self.recompute:
             raise TensormassError(f"{self}: min_det_F() needs precomputed shape gradients (constants='precompute')")
-        D, u = self._displacements(D, u)
+        if cells is None:
+            D, u = self._displacements(D, u)
+            n = len(D)
+            U = u.reshape(n * self.n_nodes, self.dim)
+            cells = np.arange(n * self.n_nodes).reshape(n, self.n_nodes)
+        else:
+            D = np.ascontiguousarray(D, dtype=np.float64)
+            U = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, self.dim)
+            if cells.shape != (len(D), self.n_nodes):
+                raise TensormassError(f"{self}: cells must have shape ({len(D)}, {self.n_nodes}), got {cells.shape}")
         out = np.empty(len(D))
-        (_min_det_3d if self.dim == 3 else _min_det_2d)(D, u, self.n_points, 1 + self.n_dofs, out)
+        (_min_det_3d if self.dim == 3 else _min_det_2d)(D, cells, U, self.n_points, 1 + self.n_dofs, out)
         return out
 
-    def inverted(self, D, u) -> np.ndarray:
+    def inverted(self, D, u, cells=None) -> np.ndarray:
         """Boolean mask of elements whose det F <= 0 at some integration point (any law)."""
-        return ~(self.min_det_F(D, u) > 0.0)
+        return ~(self.min_det_F(D, u, cells) > 0.0)
 
 
 # min det F from the stored constants: per point q, D[e, q*stride] is the weight x det J and the
@@ -150,7 +163,7 @@ class Kernel:
 # implicit steps check every element after every step (laws undefined at det F <= 0, the health
 # monitor), and the einsum version allocated an (n, dim, dim) F per point.
 @njit(cache=True)
-def _min_det_3d(D, u, n_points, stride, out):
+def _min_det_3d(D, cells, U, n_points, stride, out):
     for e in range(D.shape[0]):
         low = np.inf
         for q in range(n_points):
@@ -158,9 +171,10 @@ def _min_det_3d(D, u, n_points, stride, out):
             f00 = 1.0; f01 = 0.0; f02 = 0.0                       # noqa: E702
             f10 = 0.0; f11 = 1.0; f12 = 0.0                       # noqa: E702
             f20 = 0.0; f21 = 0.0; f22 = 1.0                       # noqa: E702
-            for i in range(u.shape[1]):
+            for i in range(cells.shape[1]):
+                n = cells[e, i]
                 gx, gy, gz = D[e, b + 3 * i], D[e, b + 3 * i + 1], D[e, b + 3 * i + 2]
-                ux, uy, uz = u[e, i, 0], u[e, i, 1], u[e, i, 2]
+                ux, uy, uz = U[n, 0], U[n, 1], U[n, 2]
                 f00 += ux * gx; f01 += ux * gy; f02 += ux * gz    # noqa: E702
                 f10 += uy * gx; f11 += uy * gy; f12 += uy * gz    # noqa: E702
                 f20 += uz * gx; f21 += uz * gy; f22 += uz * gz    # noqa: E702
@@ -172,16 +186,17 @@ def _min_det_3d(D, u, n_points, stride, out):
 
 
 @njit(cache=True)
-def _min_det_2d(D, u, n_points, stride, out):
+def _min_det_2d(D, cells, U, n_points, stride, out):
     for e in range(D.shape[0]):
         low = np.inf
         for q in range(n_points):
             b = q * stride + 1
             f00 = 1.0; f01 = 0.0; f10 = 0.0; f11 = 1.0          # noqa: E702
-            for i in range(u.shape[1]):
+            for i in range(cells.shape[1]):
+                n = cells[e, i]
                 gx, gy = D[e, b + 2 * i], D[e, b + 2 * i + 1]
-                f00 += u[e, i, 0] * gx; f01 += u[e, i, 0] * gy    # noqa: E702
-                f10 += u[e, i, 1] * gx; f11 += u[e, i, 1] * gy    # noqa: E702
+                f00 += U[n, 0] * gx; f01 += U[n, 0] * gy          # noqa: E702
+                f10 += U[n, 1] * gx; f11 += U[n, 1] * gy          # noqa: E702
             det = f00 * f11 - f01 * f10
             if not det >= low:
                 low = det
