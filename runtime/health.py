@@ -84,8 +84,8 @@ def _spread(U):
 
 def part_min_det_F(model, part, u: np.ndarray) -> np.ndarray | None:
     """min det F per active element of a part; None for kernels without stored shape gradients."""
-    if getattr(part.kernel, "recompute", False):
-        return None
+    if getattr(part.kernel, "recompute", False) or not hasattr(part.kernel, "min_det_F"):
+        return None                        # (a hand-written kernel may have no inversion check)
     return part.kernel.min_det_F(part.D_active, u, cells=part.cells_active)
 
 
@@ -144,7 +144,7 @@ class HealthMonitor:
     def _energy_scale(self, ctx, duration) -> float:
         model = self.model
         with np.errstate(over="ignore", invalid="ignore"):
-            load = float(np.sum(np.linalg.norm(model.f_ext.reshape(-1, model.dim), axis=1))) * model.size
+            load = float(np.sum(np.linalg.norm(model.nodal(model.f_ext), axis=1))) * model.size
             boundary = self._boundary_energy(ctx)
             motion = 0.0
             if self.dynamic and duration:
@@ -217,7 +217,7 @@ class HealthMonitor:
         values = [v for v in energies.values() if v is not None]
         if not (np.all(np.isfinite(ctx.u)) and np.all(np.isfinite(ctx.v)) and np.all(np.isfinite(values))):
             return Check(stop=f"step {step}: the state or its energy is not finite (NaN/Inf): the solution diverged")
-        rel = float(_spread(ctx.u.reshape(model.n_points, model.dim))) / model.size
+        rel = float(_spread(np.ascontiguousarray(model.split_dofs(ctx.u)[0]))) / model.size
         self.max_rel_u = max(self.max_rel_u, rel)
         if rel > self.max_displacement:
             return Check(stop=f"step {step}: a node moved {rel:.3g} body sizes ({rel * model.size:.3g} m) relative to "

@@ -3,7 +3,9 @@
     model = Model.from_scene(scene)           # or Model(mesh, materials, fixed=..., loads=...)
     model.parts[0].kernel, model.parts[0].D   # one (element, law, quadrature) group each
 
-Dofs are node-major: dof = node * dim + component.  Everything here is built
+Dofs are node-major: dof = node * dofs_per_node + component (runtime.dofs: dofs_per_node is
+the space dimension for solids, the element table's count for bars, springs, shells; the
+first dim dofs of a node are its displacement where it has that many).  Everything here is built
 once; the integrators only read it.  Only the kernels a scene needs are loaded
 (`Model.required_kernels`), and only the outputs its integrator declares
 (`runtime.integrators`, e.g. `Static.outputs`) are compiled (`Model.warm_up`).
@@ -16,9 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import elements as _element_types
 from .. import laws
+from . import custom_kernels as _custom
 from . import kernels as _kernels
 from . import resources
+from .dofs import dofs_per_node as _dofs_per_node
+from .dofs import node_dofs, split_nodal
 from .errors import ElementError, TensormassError
 from .integrators import outputs_for
 from .mesh import Mesh, boundary_faces, check_mesh
@@ -44,7 +50,7 @@ class Part:
     cell_ids: np.ndarray         # (n,) global cell ids, for messages
     D: np.ndarray                # (n, n_constants) per-element constants
     volume: np.ndarray           # (n,) rest volumes (areas in 2D)
-    dofs: np.ndarray             # (n, k * dim) global dofs, node-major
+    dofs: np.ndarray             # (n, k * dofs_per_node) global dofs, node-major
     density: np.ndarray          # (n,) mass density of each cell
     active: np.ndarray | None = None   # (n,) bool: cells this law currently models (None: all)
 
@@ -108,6 +114,10 @@ class LawGroup:
 # --------------------------------------------------------------------------- mesh and materials
 
 
+def _element_dim(cell_type: str) -> int:
+    return _element_types.get(cell_type).dim
+
+
 def _size(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 1.0
 
@@ -142,7 +152,11 @@ class Model:
         self.output = output if output is not None else Output()
         self.loads = loads if loads is not None else Loads()
         self.dim, self.n_points = mesh.dim, mesh.n_points
-        self.n_dofs = self.n_points * self.dim
+        self.dofs_per_node = _dofs_per_node(mesh)
+        self.n_dofs = self.n_points * self.dofs_per_node
+        # components of a load or prescribed-displacement vector: the displacement dofs
+        self.n_load = min(self.dim, self.dofs_per_node)
+        self._check_dof_loads(adapt)
         self.size = _size(mesh.points)
         self.box_tol = box_tolerance(mesh.points)
         self.outputs = outputs_for(self.solver.kind)
@@ -207,13 +221,16 @@ class Model:
         for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
             cells = np.vstack([self.mesh.blocks[b].cells[ids] for b, ids, _ in members])
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
-            dofs = (cells[:, :, None] * self.dim + np.arange(self.dim)).reshape(len(cells), -1)
+            dofs = node_dofs(cells, self.dofs_per_node)
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
             reach = reachable_laws(law, self.adapt)
             first = len(parts)
             for k, name in enumerate(reach):
                 # a module attribute lookup, so tests can spy on which kernels get loaded
-                kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
+                kernel = _custom.registered_kernel(element, name, quad)
+                if kernel is None:
+                    kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
+                self._check_kernel_dofs(kernel, element, cells)
                 D = self._constants(kernel, cells, cell_ids, self._parameters(name, members))
                 stride = 1 + kernel.n_dofs
                 volume = D[:, 0:kernel.n_points * stride:stride].sum(axis=1)
@@ -257,7 +274,7 @@ class Model:
             np.add.at(node_mass, part.cells, np.broadcast_to(share[:, None], part.cells.shape))
         if np.any(node_mass < 0):
             raise TensormassError("negative density gives negative nodal masses")
-        return np.repeat(node_mass, self.dim)
+        return np.repeat(node_mass, self.dofs_per_node)
 
     def _nodes_in(self, box, what: str) -> np.ndarray:
         nodes = np.flatnonzero(box_contains(box, self.mesh.points, self.box_tol))
@@ -265,42 +282,45 @@ class Model:
             raise TensormassError(f"{what}: no node inside box {box!r}")
         return nodes
 
-    def _vector(self, value, what: str) -> np.ndarray:
+    def _vector(self, value, what: str, n: int | None = None) -> np.ndarray:
+        n = self.n_load if n is None else n
         v = np.asarray(value, dtype=float).reshape(-1)
-        if v.size < self.dim or not np.all(np.isfinite(v)):
-            raise TensormassError(f"{what} must be a finite vector of {self.dim} components, got {value!r}")
-        return v[:self.dim]
+        if v.size < n or not np.all(np.isfinite(v)):
+            raise TensormassError(f"{what} must be a finite vector of {n} components, got {value!r}")
+        return v[:n]
 
     def _constraints(self, fixed) -> tuple:
         """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
         for i, fx in enumerate(fixed):
             self._nodes_in(fx.box, f"fixed[{i}]")
-            comps = np.arange(self.dim) if fx.components is None else np.asarray(fx.components, dtype=int)
-            if comps.size == 0 or comps.min() < 0 or comps.max() >= self.dim:
-                raise TensormassError(f"fixed[{i}].components must be in 0..{self.dim - 1}, got {fx.components!r}")
+            n = self.dofs_per_node
+            comps = np.arange(n) if fx.components is None else np.asarray(fx.components, dtype=int)
+            if comps.size == 0 or comps.min() < 0 or comps.max() >= n:
+                raise TensormassError(f"fixed[{i}].components must be in 0..{n - 1}, got {fx.components!r}")
             if fx.displacement is not None:
-                self._vector(fx.displacement, f"fixed[{i}].displacement")
+                self._vector(fx.displacement, f"fixed[{i}].displacement", max(self.n_load, int(comps.max()) + 1))
         # entries that give one dof different values are refused there (the order would decide)
-        target = prescribed_values(fixed, self.mesh.points, self.box_tol)[0].ravel()
+        target = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node)[0].ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
         used = np.zeros(self.n_points, bool)
         for part in self.parts:
             used[part.cells.ravel()] = True
-        orphan = (np.flatnonzero(~used)[:, None] * self.dim + np.arange(self.dim)).ravel()
+        orphan = node_dofs(np.flatnonzero(~used)[:, None], self.dofs_per_node).ravel()
         target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
         dofs = np.flatnonzero(~np.isnan(target))
         return dofs, target[dofs]
 
     def _external_forces(self) -> np.ndarray:
-        f = (self.mass.reshape(-1, self.dim) * self._vector(self.loads.gravity, "loads.gravity")).ravel()
+        f = np.zeros(self.n_dofs)
+        self._loaded(f)[:] = self._loaded(self.mass) * self._vector(self.loads.gravity, "loads.gravity")
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
             if load.kind == "force":
                 nodes = self._nodes_in(load.box, f"loads.nodal[{i}]")
-                f.reshape(-1, self.dim)[nodes] += force / nodes.size
+                self._loaded(f)[nodes] += force / nodes.size
             elif load.kind == "traction":
-                self._add_traction(f.reshape(-1, self.dim), load.box, force, i)
+                self._add_traction(self._loaded(f), load.box, force, i)
             else:
                 raise TensormassError(f"loads.nodal[{i}].kind must be 'force' or 'traction', got {load.kind!r}")
         return f
@@ -319,18 +339,18 @@ class Model:
             raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
 
     def _nearest_node(self, point) -> int:
-        p = self._vector(point, "probe point")
+        p = self._vector(point, "probe point", self.dim)
         return int(np.argmin(np.sum((self.mesh.points - p) ** 2, axis=1)))
 
     # -- helpers for the integrators ------------------------------------------------------------
     def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
-        """(n_active, k, dim) nodal displacements of a part's active elements (pair with part.D_active)."""
-        return u.reshape(self.n_points, self.dim)[part.cells_active]
+        """(n_active, k, dofs_per_node) nodal dofs of a part's active elements (pair with part.D_active)."""
+        return u.reshape(self.n_points, self.dofs_per_node)[part.cells_active]
 
     def warm_up(self, outputs=None) -> None:
         """Compile (or load from numba's cache) the kernel outputs the solver will call."""
         for part in self.parts:
-            D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dim))
+            D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dofs_per_node))
             for name in outputs or self.outputs:
                 getattr(part.kernel, name)(D, u)
 
@@ -362,5 +382,44 @@ class Model:
         return np.array([ids.get(law, -1) for law in self.cell_laws()], dtype=np.int64)
 
     def probe_values(self, u: np.ndarray) -> dict:
-        U = u.reshape(self.n_points, self.dim)
+        U = self.nodal(u)
         return {name: U[node].tolist() for name, node in self.probes.items()}
+
+    # -- dofs that are not (only) displacements: bars, springs, shells (runtime.dofs) -------------
+    def nodal(self, u: np.ndarray) -> np.ndarray:
+        """(n_points, dofs_per_node) view of a global dof vector."""
+        return u.reshape(self.n_points, self.dofs_per_node)
+
+    def split_dofs(self, u: np.ndarray) -> tuple:
+        """(displacement (n_points, dim), {name: extra point field}) of a global dof vector (runtime.dofs)."""
+        return split_nodal(self.nodal(u), self.dim)
+
+    def _loaded(self, x: np.ndarray) -> np.ndarray:
+        """(n_points, n_load) view of a global dof vector: the dofs loads and gravity act on."""
+        X = x.reshape(self.n_points, self.dofs_per_node)
+        return X if self.n_load == self.dofs_per_node else X[:, :self.n_load]
+
+    def _check_kernel_dofs(self, kernel, element: str, cells) -> None:
+        """A kernel (generated or registered) must fit the element type and the model's dof layout."""
+        k = cells.shape[1]
+        if kernel.n_nodes != k or kernel.n_dofs != k * self.dofs_per_node or kernel.dim != self.dim:
+            raise TensormassError(
+                f"kernel {kernel!r} for {element}: {kernel.n_nodes} nodes, {kernel.n_dofs} dofs in {kernel.dim}D; "
+                f"the model needs {k} nodes, {k * self.dofs_per_node} dofs ({self.dofs_per_node} per node) "
+                f"in {self.dim}D")
+
+    def _check_dof_loads(self, adapt) -> None:
+        """Refuse what a model whose dofs are not a displacement field cannot mean."""
+        if self.dofs_per_node < self.dim:
+            g = np.asarray(self.loads.gravity, dtype=float).reshape(-1)
+            if np.any(g != 0):
+                raise TensormassError(f"loads.gravity: the nodes carry {self.dofs_per_node} dof(s), not a "
+                                      f"{self.dim}D displacement; gravity does not apply (use nodal forces)")
+            for i, load in enumerate(self.loads.nodal):
+                if load.kind == "traction":
+                    raise TensormassError(f"loads.nodal[{i}] (traction): the nodes carry {self.dofs_per_node} "
+                                          f"dof(s), not a {self.dim}D displacement; use kind = 'force'")
+        solid = all(_element_dim(b.type) == self.dim for b in self.mesh.blocks)
+        if adapt and not (solid and self.dofs_per_node == self.dim):
+            raise TensormassError("[[adapt]] rules need solid elements (topological dimension = space dimension, "
+                                  "dofs per node = dimension)")

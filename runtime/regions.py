@@ -176,15 +176,17 @@ def _why_unused(materials, mesh, which, i: int) -> str:
 # ============================================================================== [[fixed]]
 
 
-def prescribed_values(fixed, points, tol: float):
+def prescribed_values(fixed, points, tol: float, components: int | None = None):
     """(value, owner) per node and component: the prescribed displacement (NaN: free) and the
-    index of the [[fixed]] entry that prescribes it.
+    index of the [[fixed]] entry that prescribes it.  components: dofs per node (default: the
+    points' dimension; runtime.dofs).
 
     Two entries prescribing different values for the same dof are refused (SceneError
     naming both and a node): which one wins would otherwise depend on their order.
     """
     points = np.asarray(points, dtype=float)
     n, dim = points.shape
+    dim = dim if components is None else int(components)
     value = np.full((n, dim), np.nan)
     owner = np.full((n, dim), -1, dtype=np.int64)
     for i, f in enumerate(fixed):

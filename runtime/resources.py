@@ -105,6 +105,11 @@ CELLS_PER_BOX = {"hexahedron": 1, "tetra": 6, "tetra10": 6, "wedge": 2, "pyramid
 # registered after import.
 def _nodes(cell_type: str) -> int:
     return _elements.get(cell_type).n_nodes
+
+
+def _dofs_per_node(cell_type: str, dim: int) -> int:
+    """The space dimension for solids, the element table's count otherwise (runtime.dofs)."""
+    return _elements.get(cell_type).n_dofs(dim) // _nodes(cell_type)
 # Simulation keeps at most simulation.HISTORY_MAX rows (a test checks they agree); a row
 # is 7 Python numbers (32 B each), once in the history and once in the summary dict.
 HISTORY_ROWS = 4096
@@ -329,7 +334,7 @@ def _uncatalogued_entry(element) -> dict:
     generator uses (per point: weight x det J, then a shape gradient per node), and op counts
     scaled like the catalogue's (f+K ~ 4 nd^2 per point, forces ~ 20 nd, energy ~ 60)."""
     el = _elements.get(element)
-    points, nd = el.n_nodes, el.n_nodes * el.dim
+    points, nd = el.n_nodes, el.n_dofs(max(el.space_dims))
     per_point = {"energy": 60, "forces": 20 * nd, "stiffness": 4 * nd * nd, "forces_and_stiffness": 4 * nd * nd}
     return {"constants": points * (1 + nd) + 8, "ops": {k: points * v for k, v in per_point.items()}}
 
@@ -449,6 +454,8 @@ class _Estimator:
         self.kind = solver.kind
         self.output = _STEP_OUTPUT.get(self.kind, "forces_and_stiffness")
         dim = counts.dim
+        # dofs per node (runtime.dofs): the dimension for solids; one count per mesh
+        dim = self.dpn = max((_dofs_per_node(t, dim) for t in counts.cells), default=dim)
         self.dofs = counts.nodes * dim
         self.entries = self.constants = self.ops = self.cell_ints = self.cell_dofs = 0
         self.projection = False
@@ -496,6 +503,7 @@ class _Estimator:
         c, dim = self.c, self.c.dim
         mesh = 8 * (c.nodes * dim + self.cell_ints)
         constants = 8 * self.constants
+        dim = self.dpn                       # from here on: per-node dofs
         model = 8 * self.cell_ints * (1 + dim) + CELL_BYTES * sum(c.cells.values()) + DOF_BYTES * self.dofs
         matrices = 8 * self.entries
         pattern = matrices + NNZ_HELD * self.nnz
@@ -524,7 +532,7 @@ class _Estimator:
     def _seconds(self) -> float:
         kernel = self.ops * SECONDS_PER_OP
         if self.kind == "explicit":
-            return kernel + SECONDS_PER_ENTRY * self.cell_ints * self.c.dim
+            return kernel + SECONDS_PER_ENTRY * self.cell_ints * self.dpn
         if self.linear == "band":
             solve = BAND_SECONDS * self.dofs * float(self.kd) ** 2
         else:

@@ -138,19 +138,25 @@ class Simulation:
             return None
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.size != self.model.n_dofs or not np.all(np.isfinite(x)):
-            raise TensormassError(f"initial state must be {self.model.n_points} x {self.model.dim} finite values")
+            raise TensormassError(f"initial state must be {self.model.n_points} x {self.model.dofs_per_node} finite values")
         return x.copy()
 
     # -- state ------------------------------------------------------------------------------------
     @property
-    def displacement(self) -> np.ndarray:
+    def dofs(self) -> np.ndarray:
+        """(n_points, dofs_per_node): every nodal unknown (the displacement first where it is one)."""
         u = self.ctx.u if self.ctx is not None else (self._u0 if self._u0 is not None else np.zeros(self.model.n_dofs))
-        return u.reshape(self.model.n_points, self.model.dim).copy()
+        return self.model.nodal(u).copy()
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """(n_points, dim); zeros where the nodes carry fewer dofs than dim (see Simulation.dofs)."""
+        return np.array(self.model.split_dofs(self.dofs.ravel())[0])
 
     @property
     def velocity(self) -> np.ndarray:
         v = self.ctx.v if self.ctx is not None else np.zeros(self.model.n_dofs)
-        return v.reshape(self.model.n_points, self.model.dim).copy()
+        return np.array(self.model.split_dofs(v)[0])
 
     # -- run --------------------------------------------------------------------------------------
     def _prepare(self):
@@ -259,7 +265,7 @@ class Simulation:
 
     def _rebuild(self, model, parents) -> None:
         """Carry the state and the counters over to a refined model (new pattern, masses, constants)."""
-        old, dim = self.ctx, model.dim
+        old, dim = self.ctx, model.dofs_per_node
         ctx = Context(model)
         model.warm_up()
         ctx.asm.warm_up()
@@ -299,6 +305,7 @@ class Simulation:
         if self.writer is None:
             return
         fields = {} if self.model.solver.kind == "static" else {"velocity": self.velocity}
+        fields.update(self.model.split_dofs(self.dofs.ravel())[1])      # dofs past the displacement (runtime.dofs)
         # only the keywords in use, so simple writers (write_frame(step, t, X, u, fields)) keep working
         extra = {} if flag is None else {"flag": flag}
         if self.adapter is not None:          # watch the criteria and the law of each cell in ParaView
