@@ -253,6 +253,38 @@ def test_degenerate_bar_is_reported_with_its_cell_id(bar3d):
                                               [CellBlock("line", [[0, 3], [1, 3], [3, 4]])]))
 
 
+def _tet_stiffness(X, lam, mu):
+    """Linear-elastic stiffness of a 4-node tetrahedron by hand: V B^T C B (Voigt, engineering shear)."""
+    J = (X[1:] - X[0]).T
+    G = np.linalg.solve(J.T, np.array([[-1.0, -1, -1], [1, 0, 0], [0, 1, 0], [0, 0, 1]]).T).T   # grad N_i
+    B = np.zeros((6, 12))
+    for i, (gx, gy, gz) in enumerate(G):
+        B[:, 3 * i:3 * i + 3] = [[gx, 0, 0], [0, gy, 0], [0, 0, gz], [gy, gx, 0], [0, gz, gy], [gz, 0, gx]]
+    C = np.diag([2 * mu] * 3 + [mu] * 3)
+    C[:3, :3] += lam
+    return abs(np.linalg.det(J)) / 6 * B.T @ C @ B
+
+
+def test_bar_rides_on_a_solid(bar3d):
+    """A tetrahedron (generated kernel) and a bar (registered kernel) share the apex node: the apex
+    displacement solves (K_tet + K_bar) u = F with both stiffnesses computed by hand."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.3, 1.0], [1.2, 1.1, 2.0]])
+    mesh = Mesh(pts, [CellBlock("tetra", [[0, 1, 2, 3]]), CellBlock("line", [[3, 4]])])
+    F = np.array([2.0e5, -1.0e5, 3.0e5])
+    fixed = [Fixed(box=((-BIG, -BIG, -1e-6), (BIG, BIG, 1e-6))), Fixed(box=_box(pts[4]))]
+    model = Model(mesh, [_material()], fixed=fixed, loads=Loads(nodal=[NodalLoad(box=_box(pts[3]), force=tuple(F))]))
+    assert {p.element for p in model.parts} == {"tetra", "line"} and model.dofs_per_node == 3
+    sim = Simulation(model)
+    sim.run()
+    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+    d = pts[4] - pts[3]
+    L = np.linalg.norm(d)
+    K = _tet_stiffness(pts[:4], lam, mu)[9:, 9:] + E * AREA / L * np.outer(d, d) / L ** 2
+    np.testing.assert_allclose(sim.displacement[3], np.linalg.solve(K, F), rtol=1e-9)
+    # the bar's volume joins the lumped mass of its two nodes
+    np.testing.assert_allclose(model.mass.reshape(5, 3)[4], RHO * AREA * L / 2)
+
+
 # --------------------------------------------------------------------------- dofs per node != dimension
 
 
@@ -264,7 +296,7 @@ def test_scalar_spring_chain_in_2d(spring2d, tmp_path):
     model = Model(mesh, [_material()], fixed=[Fixed(box=_box(pts[0]))],
                   loads=Loads(gravity=(0.0, 0.0), nodal=[NodalLoad(box=_box(pts[2]), force=(F,))]),
                   probes=[Probe("end", (1.0, 2.0))])
-    assert (model.dim, model.dofs_per_node, model.n_dofs) == (2, 1, 3)
+    assert (model.dim, model.dofs_per_node, model.n_dofs) == (2, 1, 3) and model.estimate.dofs == 3
     assert model.fixed_dofs.tolist() == [0]
     np.testing.assert_allclose(model.mass, RHO * AREA * np.array([0.5, 1.5, 1.0]))
     writer = Writer(tmp_path, mesh)
@@ -309,6 +341,7 @@ def test_six_dofs_per_node_bar_with_torsion(torsion3d, tmp_path):
     model = Model(mesh, [_material()], fixed=fixed,
                   loads=Loads(nodal=[NodalLoad(box=_box(mesh.points[2]), force=(F, 0, 0))]))
     assert (model.dofs_per_node, model.n_dofs, model.n_load) == (6, 18, 3)
+    assert model.estimate.dofs == 18                        # the resource estimate counts them too
     assert model.free_dofs.tolist() == [6, 9, 12]
     # gravity and forces act on the displacement dofs only
     np.testing.assert_allclose(model.f_ext.reshape(3, 6)[2], [F, 0, 0, 0, 0, 0])
