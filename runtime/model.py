@@ -411,7 +411,10 @@ class Model:
     def _check_dof_loads(self, adapt) -> None:
         """Refuse what a model whose dofs are not a displacement field cannot mean."""
         if self.dofs_per_node < self.dim:
-            g = np.asarray(self.loads.gravity, dtype=float).reshape(-1)
+            try:
+                g = np.asarray(self.loads.gravity, dtype=float).reshape(-1)
+            except (TypeError, ValueError):
+                g = np.zeros(0)            # not a vector: _external_forces says so
             if np.any(g != 0):
                 raise TensormassError(f"loads.gravity: the nodes carry {self.dofs_per_node} dof(s), not a "
                                       f"{self.dim}D displacement; gravity does not apply (use nodal forces)")

@@ -110,6 +110,8 @@ def _nodes(cell_type: str) -> int:
 def _dofs_per_node(cell_type: str, dim: int) -> int:
     """The space dimension for solids, the element table's count otherwise (runtime.dofs)."""
     return _elements.get(cell_type).n_dofs(dim) // _nodes(cell_type)
+
+
 # Simulation keeps at most simulation.HISTORY_MAX rows (a test checks they agree); a row
 # is 7 Python numbers (32 B each), once in the history and once in the summary dict.
 HISTORY_ROWS = 4096
