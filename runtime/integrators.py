@@ -43,6 +43,9 @@ class Context:
         self.asm = assembler if assembler is not None else Assembler(model)
         self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs)
         self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
+        if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
+            # follower pressure on an open surface: non-symmetric Newton matrices (runtime/pressure.py)
+            self.linear = LinearSolver("lu", s.cg_tolerance, s.cg_max_iterations)
         # PSD projection of element Hessians (non-Hooke parts): True always, False never,
         # None "on demand": Newton solvers switch it on when a direction fails to descend
         self.project = None if s.project_psd is None else bool(s.project_psd)

@@ -338,7 +338,12 @@ class Model:
             if not faces:
                 raise TensormassError(f"loads.pressure[{i}]: no boundary face inside box {load.box!r}")
             loads.append((faces, value))
-        return FollowerPressure(self.mesh.points, loads, self.dim) if loads else None
+        if not loads:
+            return None
+        pressure = FollowerPressure(self.mesh.points, loads, self.dim)
+        # open surfaces: the full (non-symmetric) stiffness unless CG (symmetric only) solves
+        pressure.symmetric = pressure.closed or self.solver.linear == "cg"
+        return pressure
 
     def _nearest_node(self, point) -> int:
         p = self._vector(point, "probe point")

@@ -10,12 +10,14 @@ n dA is t1 x t2 (3D faces) or (t_y, -t_x) (2D edges): a polynomial in the nodal 
 2 in 3D, 1 in 2D), so f is exact with the shape tables' rules and Simpson's rule is exact for the
 work along a straight segment.  Conservativeness: on a closed surface the pressure has the
 potential p V(x) (V the enclosed volume) and its stiffness is symmetric after assembly; on an open
-surface it has none.  The runtime treats both alike: the line search and the health monitor use
-the work of the pressure along the path actually taken (Newton steps, time steps), which is the
-potential's change (-p dV) on a closed surface; the linear solvers are symmetric (band Cholesky,
-CG), so Newton uses the symmetric part of the pressure stiffness -- exact for a closed surface
-(quadratic convergence), a quasi-Newton step for an open one (linear convergence, small
-constant when the pressure stiffness is small against the elastic one).
+surface it has none.  The runtime treats both alike for energies: the line search and the health
+monitor use the work of the pressure along the path actually taken (Newton steps, time steps),
+which is the potential's change (-p dV) on a closed surface.  Stiffness: closed surfaces add the
+symmetric part (exact after assembly: the symmetric solvers, band Cholesky and CG, keep working);
+open surfaces add the full non-symmetric K_p and their Newton systems are solved by LU
+(runtime.integrators.Context), so Newton stays quadratic.  With solver.linear = "cg" an open
+surface adds the symmetric part only: a quasi-Newton step that converges linearly, and may not
+converge at all when the pressure stiffness is not small against the elastic one.
 """
 from __future__ import annotations
 
@@ -54,6 +56,26 @@ class FollowerPressure:
         if not self.groups:
             raise TensormassError("pressure: no faces")
         self._positions = {}
+        self.closed = self._is_closed()
+        # Newton's pressure stiffness: symmetric (closed surfaces: exact; symmetric solvers) or full
+        # (open surfaces: the solver must accept a non-symmetric matrix, see runtime.model)
+        self.symmetric = self.closed
+
+    def _is_closed(self) -> bool:
+        """Every corner edge (3D) or corner vertex (2D) of the loaded faces is shared by exactly two."""
+        from .. import elements as _types
+        from ..elements._faces import FACE_ONLY
+        keys = []
+        for name, (faces, _) in self.groups.items():
+            t = FACE_ONLY.get(name) or _types.get(name)
+            if self.dim == 3:
+                for a, b in t.edges:
+                    keys.append(np.sort(faces[:, [a, b]], axis=1))
+            else:
+                keys.append(faces[:, :t.n_corners].reshape(-1, 1))
+        keys = np.vstack(keys)
+        _, counts = np.unique(keys, axis=0, return_counts=True)
+        return bool(np.all(counts == 2))
 
     def __bool__(self):
         return True
@@ -107,10 +129,12 @@ class FollowerPressure:
         return self._positions[key]
 
     def add_stiffness(self, data: np.ndarray, pattern, u: np.ndarray, scale: float = 1.0) -> np.ndarray:
-        """data += scale * sym(K_p) on the assembler's CSR pattern; returns data."""
+        """data += scale * K_p (its symmetric part when self.symmetric) on the assembler's CSR
+        pattern (structurally symmetric: a face's nodes belong to one cell); returns data."""
         for name, K in self.element_stiffness(u).items():
-            sym = 0.5 * (K + np.swapaxes(K, 1, 2))
-            np.add.at(data, self._face_positions(pattern, name, self.groups[name][0]), scale * sym.ravel())
+            if self.symmetric:
+                K = 0.5 * (K + np.swapaxes(K, 1, 2))
+            np.add.at(data, self._face_positions(pattern, name, self.groups[name][0]), scale * K.ravel())
         return data
 
     def work(self, u0: np.ndarray, u1: np.ndarray) -> float:
