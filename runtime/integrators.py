@@ -128,7 +128,7 @@ class _Potential:
 
     def hessian(self, u, project):
         data = self.asm.stiffness(u, project)
-        if self.pressure is not None:       # symmetric part: the linear solvers are symmetric
+        if self.pressure is not None:       # full on open surfaces (LU, see Context), else its symmetric part
             self.pressure.add_stiffness(data, self.asm.pattern, u, self.factor)
         return data
 
