@@ -34,6 +34,7 @@ from ..generator.backends import BACKENDS
 from ..generator.catalogue import entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
+from ..generator import shape_tables
 from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
                               TensormassError)
 from ..runtime.output import check_writable
@@ -79,6 +80,7 @@ def cmd_generate(args) -> int:
         return check(selected, backends)
     out = _output_folder(args.out)
     generate_all(selected, backends, out, constants=args.constants)
+    shape_tables.write(out)                # N, dN/dxi for consistent loads and masses (runtime/loads.py)
     if "numba" in backends and not args.no_compile and args.constants == "precompute":
         report_numba_compile_times(selected, out)
     return 0
@@ -99,6 +101,7 @@ def check(selected, backends) -> int:
     committed = committed_dir()
     with tempfile.TemporaryDirectory() as tmp:
         generate_all(selected, backends, Path(tmp))
+        shape_tables.write(Path(tmp))      # compared below like every generated file
         fresh = Path(tmp)
         differing = []
         for path in sorted(fresh.rglob("*")):

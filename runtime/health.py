@@ -144,7 +144,9 @@ class HealthMonitor:
     def _energy_scale(self, ctx, duration) -> float:
         model = self.model
         with np.errstate(over="ignore", invalid="ignore"):
-            load = float(np.sum(np.linalg.norm(model.nodal(model.f_ext), axis=1))) * model.size
+            f = model.f_ext if getattr(model, "pressure", None) is None else (
+                np.abs(model.f_ext) + np.abs(model.pressure.forces(np.zeros(model.n_dofs))))  # pressure at rest
+            load = float(np.sum(np.linalg.norm(model.nodal(f), axis=1))) * model.size
             boundary = self._boundary_energy(ctx)
             motion = 0.0
             if self.dynamic and duration:

@@ -43,6 +43,9 @@ class Context:
         self.asm = assembler if assembler is not None else Assembler(model)
         self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs)
         self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
+        if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
+            # follower pressure on an open surface: non-symmetric Newton matrices (runtime/pressure.py)
+            self.linear = LinearSolver("lu", s.cg_tolerance, s.cg_max_iterations)
         # PSD projection of element Hessians (non-Hooke parts): True always, False never,
         # None "on demand": Newton solvers switch it on when a direction fails to descend
         self.project = None if s.project_psd is None else bool(s.project_psd)
@@ -78,9 +81,26 @@ class Context:
 class _Potential:
     """Total potential Pi(u) = W(u) - f_ext.u (+ optional quadratic inertia/damping terms)."""
 
-    def __init__(self, asm, f_ext):
+    def __init__(self, asm, f_ext, factor=1.0):
         self.asm, self.f_ext = asm, f_ext
         self.free = asm.model.free_dofs
+        # follower pressure (runtime/pressure.py) x the load factor: no potential on open surfaces, so
+        # its energy is the work along the Newton path (exact on each straight step: see accept)
+        self.pressure, self.factor = getattr(asm.model, "pressure", None), float(factor)
+        self._anchor = None                         # (u, pressure energy there)
+
+    def _pressure_energy(self, u):
+        if self.pressure is None:
+            return 0.0
+        if self._anchor is None:
+            self._anchor = (u.copy(), 0.0)
+        u0, e0 = self._anchor
+        return e0 - self.factor * self.pressure.work(u0, u)
+
+    def accept(self, u, energy=None):
+        """Newton moved to u: later energies are measured along the path from here."""
+        if self.pressure is not None:
+            self._anchor = (u.copy(), self._pressure_energy(u) if energy is None else energy)
 
     def extra(self, u):
         """(value, gradient, magnitude) of quadratic terms; none for statics."""
@@ -94,18 +114,23 @@ class _Potential:
             return np.inf, 0.0
         work = float(self.f_ext @ u)
         q, _, qmag = self.extra(u)
-        return W - work + q, abs(W) + abs(work) + qmag
+        P = self._pressure_energy(u)
+        return W - work + q + P, abs(W) + abs(work) + qmag + abs(P)
 
     def gradient(self, u):
         _, dq, _ = self.extra(u)
-        return dq - self.asm.forces(u) - self.f_ext
+        g = dq - self.asm.forces(u) - self.f_ext
+        return g if self.pressure is None else g - self.factor * self.pressure.forces(u)
 
     def force_scale(self, u):
         """Forces that set the convergence tolerance: the external load (plus inertia, below)."""
         return safe_norm(self.f_ext[self.free])
 
     def hessian(self, u, project):
-        return self.asm.stiffness(u, project)
+        data = self.asm.stiffness(u, project)
+        if self.pressure is not None:       # full on open surfaces (LU, see Context), else its symmetric part
+            self.pressure.add_stiffness(data, self.asm.pattern, u, self.factor)
+        return data
 
 
 class _IncrementalPotential(_Potential):
@@ -118,12 +143,12 @@ class _IncrementalPotential(_Potential):
         self.alpha, self.K_n = alpha, K_n              # K_n: CSR (beta already folded in) or None
 
     def _damping(self, x):
-        out = self.alpha * self.mass * x
+        out = self.alpha * (self.mass @ x)
         return out if self.K_n is None else out + self.K_n @ x
 
     def extra(self, u):
         a, b = u - self.u_pred, u - self.u_n
-        Ma, Db = self.mass * a, self._damping(b)
+        Ma, Db = self.mass @ a, self._damping(b)
         q = 0.5 * (a @ Ma) / self.h**2 + 0.5 * (b @ Db) / self.h
         return q, Ma / self.h**2 + Db / self.h, abs(q)
 
@@ -133,8 +158,8 @@ class _IncrementalPotential(_Potential):
         return max(super().force_scale(u), safe_norm(dq[self.free]))
 
     def hessian(self, u, project):
-        data = self.asm.stiffness(u, project)
-        data[self.asm.pattern.diagonal] += self.mass * (1.0 / self.h**2 + self.alpha / self.h)
+        data = super().hessian(u, project)
+        self.mass.add_to(data, self.asm.pattern, 1.0 / self.h**2 + self.alpha / self.h)
         if self.K_n is not None:
             data += self.K_n.data / self.h
         return data
@@ -187,6 +212,7 @@ def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndar
             raise TensormassError(f"{where}: line search failed (residual {res:.3e}); the load step is too "
                                   "large or elements invert: use more steps")
         u_new, a, Pi, mag, g_new = found
+        potential.accept(u_new)
         tiny = np.abs(a * d).max() <= 1e-13 * max(np.abs(u_new).max(), 1e-9 * model.size)
         u = u_new
         g = potential.gradient(u) if g_new is None else g_new
@@ -258,7 +284,7 @@ class Static(_Integrator):
     def step(self, k: int) -> dict:
         ctx, lam = self.ctx, k / self.n_steps
         before = ctx.newton_iterations
-        potential = _Potential(ctx.asm, lam * self.model.f_ext)
+        potential = _Potential(ctx.asm, lam * self.model.f_ext, lam)
         ctx.u, _ = newton(ctx, potential, ctx.u, self.prescribed(lam),
                           f"static: load step {k}/{self.n_steps}")
         ctx.t = lam
@@ -276,7 +302,7 @@ class _Dynamic(_Integrator):
             raise TensormassError(f"solver.dt must be > 0, got {s.dt}")
         self.alpha, self.beta = (float(x) for x in s.rayleigh)
         self.duration = self.dt * self.n_steps
-        self.mass = self.model.mass
+        self.mass = self.model.mass_matrix        # runtime.mass.MassMatrix: M @ x, M.add_to(...)
 
     def boundary_velocity(self):
         """Velocity of the fixed dofs under the linear ramp over the run."""
@@ -320,8 +346,11 @@ class ImplicitEuler(_Dynamic):
         ctx = self.ctx
         f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
         Kv = ctx.asm.matrix(K) @ v
-        f = f_int + self.model.f_ext - self.alpha * self.mass * v - self.beta * Kv
-        A = ctx.add_diagonal((h * self.beta + h * h) * K, (1.0 + h * self.alpha) * self.mass)
+        f = f_int + self.model.f_ext - self.alpha * (self.mass @ v) - self.beta * Kv
+        A = self.mass.added((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
+        if self.model.pressure is not None:
+            f += self.model.pressure.forces(u)
+            self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
         dv_c = self.boundary_velocity() - v[self.model.fixed_dofs]
         # CG starts from the previous step's dv: consecutive steps change v alike
         dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv)
@@ -354,6 +383,10 @@ class Explicit(_Dynamic):
 
     def __init__(self, ctx):
         super().__init__(ctx)
+        if self.mass.kind != "lumped":
+            raise TensormassError("explicit integration needs the lumped mass (solver.mass = 'lumped'): it "
+                                  "inverts the diagonal; use implicit_euler or backward_euler with 'consistent'")
+        self.mass = self.model.mass               # the lumped masses per dof
         free = self.model.free_dofs
         if np.any(self.mass[free] <= 0):
             raise TensormassError("explicit integration needs a positive mass at every free node (density > 0)")
@@ -366,6 +399,8 @@ class Explicit(_Dynamic):
         ctx, free, fixed = self.ctx, self.model.free_dofs, self.model.fixed_dofs
         f_int = ctx.asm.forces(u)
         f = f_int + self.model.f_ext - self.alpha * self.mass * v
+        if self.model.pressure is not None:
+            f += self.model.pressure.forces(u)
         if self.beta:
             f -= self.beta * _stiffness_times(ctx.asm, u, v, f_int, self.model.size)
         v1 = v.copy()

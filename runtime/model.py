@@ -26,7 +26,10 @@ from . import resources
 from .dofs import dofs_per_node as _dofs_per_node
 from .dofs import node_dofs, split_nodal
 from .errors import ElementError, TensormassError
+from . import loads as _loads
 from .integrators import outputs_for
+from .mass import MassMatrix
+from .pressure import FollowerPressure
 from .mesh import Mesh, boundary_faces, check_mesh
 from .mesh import face_measure as _face_measure  # face types: the element table
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
@@ -164,9 +167,11 @@ class Model:
         self.groups: list = []                     # LawGroup per set of switchable cells
         self.parts = self._build_parts()
         self.mass = self._lumped_mass()
+        self.mass_matrix = self._mass_matrix      # runtime.mass.MassMatrix (solver.mass)
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
         self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
         self.f_ext = self._external_forces()
+        self.pressure = self._pressure_loads()    # runtime.pressure.FollowerPressure or None
         self.probes = {p.name: self._nearest_node(p.point) for p in probes}
         self.scene = None
         self.build_time = time.perf_counter() - start
@@ -267,14 +272,11 @@ class Model:
 
     # -- masses, constraints, loads ------------------------------------------------------------
     def _lumped_mass(self) -> np.ndarray:
-        """Per-dof lumped mass: density x volume split equally over each element's nodes."""
-        node_mass = np.zeros(self.n_points)
-        for part in self.parts:
-            share = np.where(part.active, part.density * part.volume / part.cells.shape[1], 0.0)
-            np.add.at(node_mass, part.cells, np.broadcast_to(share[:, None], part.cells.shape))
-        if np.any(node_mass < 0):
-            raise TensormassError("negative density gives negative nodal masses")
-        return np.repeat(node_mass, self.dofs_per_node)
+        """Per-dof lumped mass (runtime.mass): row sums of the consistent element masses for
+        linear elements (the equal split on simplices), HRZ for quadratic ones; every cell once."""
+        kind = getattr(self.solver, "mass", "lumped")
+        self._mass_matrix = MassMatrix.build(self.mesh.points, self.parts, self.dofs_per_node, kind)
+        return self._mass_matrix.lumped
 
     def _nodes_in(self, box, what: str) -> np.ndarray:
         nodes = np.flatnonzero(box_contains(box, self.mesh.points, self.box_tol))
@@ -312,8 +314,15 @@ class Model:
         return dofs, target[dofs]
 
     def _external_forces(self) -> np.ndarray:
+        """Consistent loads (runtime.loads): gravity f_a = int N_a rho g dV, tractions int N_a t dA."""
+        g = self._vector(self.loads.gravity, "loads.gravity")
         f = np.zeros(self.n_dofs)
-        self._loaded(f)[:] = self._loaded(self.mass) * self._vector(self.loads.gravity, "loads.gravity")
+        if np.any(g):
+            for part in self.parts:          # every cell once: in the part whose law models it
+                rows = np.flatnonzero(part.active)
+                shares = _loads.volume_shares(self.mesh.points, part.element, part.cells[rows], part.density[rows],
+                                              measure=part.volume[rows])
+                np.add.at(self._loaded(f), part.cells[rows], shares[:, :, None] * g)
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
             if load.kind == "force":
@@ -326,17 +335,35 @@ class Model:
         return f
 
     def _add_traction(self, f, box, traction, i):
-        """Traction per unit area on boundary faces inside the box, area-split equally over face nodes."""
-        inside = box_contains(box, self.mesh.points, self.box_tol)
-        hit = False
-        for _, _, nodes in boundary_faces(self.mesh):
-            nodes = np.asarray(nodes)
-            if not inside[nodes].all():
-                continue
-            f[nodes] += traction * _face_measure(self.mesh.points, nodes, self.dim) / nodes.size
-            hit = True
-        if not hit:
+        """Traction per unit area on the boundary faces inside the box: f_a = int N_a t dA (consistent)."""
+        faces = self._faces_in(box)
+        if not faces:
             raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
+        f += _loads.traction(self.mesh.points, faces, traction)
+
+    def _faces_in(self, box) -> dict:
+        """{face type: (n, k)} boundary faces whose nodes all lie inside the box (runtime.loads)."""
+        if getattr(self, "_boundary_faces", None) is None:
+            self._boundary_faces = _loads.boundary_faces_by_type(self.mesh)
+        return _loads.faces_in_box(self.mesh, box, self.box_tol, self._boundary_faces)
+
+    def _pressure_loads(self):
+        """Follower pressures ([[loads.pressure]]) on the boundary faces in their boxes, or None."""
+        loads = []
+        for i, load in enumerate(getattr(self.loads, "pressure", ())):
+            value = float(load.value)
+            if not np.isfinite(value):
+                raise TensormassError(f"loads.pressure[{i}].value must be a finite number, got {load.value!r}")
+            faces = self._faces_in(load.box)
+            if not faces:
+                raise TensormassError(f"loads.pressure[{i}]: no boundary face inside box {load.box!r}")
+            loads.append((faces, value))
+        if not loads:
+            return None
+        pressure = FollowerPressure(self.mesh.points, loads, self.dim)
+        # open surfaces: the full (non-symmetric) stiffness unless CG (symmetric only) solves
+        pressure.symmetric = pressure.closed or self.solver.linear == "cg"
+        return pressure
 
     def _nearest_node(self, point) -> int:
         p = self._vector(point, "probe point", self.dim)

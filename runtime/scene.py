@@ -43,7 +43,10 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [[loads.traction]]                      # force per unit area of the boundary faces in the box
     box = [[...], [...]]
     value = [0.0, 0.0, -100.0]
-    [solver]                                # the Solver fields below
+    [[loads.pressure]]                      # follower pressure (Pa) on the boundary faces in the box,
+    box = [[...], [...]]                    # normal to the deformed surface; > 0 pushes inward
+    value = 2000.0
+    [solver]                                # the Solver fields below (mass = "lumped" | "consistent")
     [[probe]]
     name = "tip"
     point = [1.2, 0.1, 0.1]
@@ -72,7 +75,7 @@ from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, ch
 from .scene_mesh import load_mesh as _load_mesh
 
 # Names that lived here before runtime.regions and runtime.scene_mesh (kept for importers).
-__all__ = ["Scene", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "Loads", "Solver", "Probe",
+__all__ = ["Scene", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "PressureLoad", "Loads", "Solver", "Probe",
            "Output", "Adapt", "box_contains", "box_tolerance", "prescribed_values", "reachable_laws",
            "switch_applies", "switch_parameters", "PROBE_TOLERANCE", "MAX_STEPS"]
 
@@ -121,9 +124,16 @@ class NodalLoad:
 
 
 @dataclass
+class PressureLoad:
+    box: tuple                            # boundary faces whose nodes all lie inside the box
+    value: float                          # Pa, normal to the current surface; > 0 pushes inward
+
+
+@dataclass
 class Loads:
     gravity: tuple = (0.0, 0.0, 0.0)
     nodal: list = field(default_factory=list)    # [NodalLoad]
+    pressure: list = field(default_factory=list)  # [PressureLoad] (runtime/pressure.py)
 
 
 @dataclass
@@ -144,6 +154,7 @@ class Solver:
     max_energy_growth: float = 100.0      # stop when the energy balance grows by this x the scene's energy scale
     max_displacement: float = 10.0        # stop when a node moves this x the body size away from the mean motion
     on_inversion: str = "warn"            # inverted elements (laws defined there): "warn" (invalid at the end) | "stop"
+    mass: str = "lumped"                  # lumped (row sums / HRZ) | consistent (implicit solvers; runtime/mass.py)
 
 
 @dataclass
@@ -282,11 +293,11 @@ _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
 _FIXED = ("box", "displacement", "components")
-_LOADS = ("gravity", "force", "traction")
+_LOADS = ("gravity", "force", "traction", "pressure")
 _LOAD = ("box", "value")
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
-           "max_displacement", "on_inversion")
+           "max_displacement", "on_inversion", "mass")
 _PROBE = ("name", "point")
 _OUTPUT = ("dir", "every")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
@@ -302,6 +313,7 @@ MAX_STEPS = 100_000_000
 _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days on a real mesh"
 LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
+MASS_KINDS = ("lumped", "consistent")       # runtime/mass.py
 BACKENDS = ("numba", "c")
 GENERATORS = ("bar",)
 ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
@@ -600,9 +612,18 @@ class _Parser:
                 box = self.box(lt["box"], f"{key}.box")
                 value = self.vector(lt["value"], f"{key}.value", dim=len(box[0]))
                 nodal.append(NodalLoad(box=box, force=value, kind=kind))
+        pressure = []
+        for i, lt in enumerate(self.tables(t.get("pressure", []), "loads.pressure")):
+            key = f"loads.pressure[{i}]"
+            self.keys(lt, key, _LOAD)
+            for k in _LOAD:
+                if k not in lt:
+                    raise SceneError(f"{key}.{k}: missing")
+            pressure.append(PressureLoad(box=self.box(lt["box"], f"{key}.box"),
+                                         value=self.number(lt["value"], f"{key}.value")))
         if gravity is None:
             gravity = (0.0,) * (self.dim or 3)
-        return Loads(gravity=gravity, nodal=nodal)
+        return Loads(gravity=gravity, nodal=nodal, pressure=pressure)
 
     def solver(self, t) -> Solver:
         self.keys(t, "solver", _SOLVER)
@@ -637,6 +658,11 @@ class _Parser:
                 setattr(s, k, self.number(t[k], f"solver.{k}", positive=True))
         if "on_inversion" in t:
             s.on_inversion = self.string(t["on_inversion"], "solver.on_inversion", INVERSION_ACTIONS)
+        if "mass" in t:
+            s.mass = self.string(t["mass"], "solver.mass", MASS_KINDS)
+            if s.mass == "consistent" and s.kind == "explicit":
+                raise SceneError("solver.mass: 'consistent' needs an implicit solver (implicit_euler, "
+                                 "backward_euler); explicit integration inverts the lumped (diagonal) mass")
         return s
 
     def probe(self, t, key, index) -> Probe:

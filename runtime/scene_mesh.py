@@ -150,6 +150,10 @@ def check_against_mesh(scene, mesh) -> None:
         vec(load.force, f"{key}.value")
         if not box_contains(load.box, mesh.points, tol).any():
             raise SceneError(f"{key}.box: no mesh node inside{bounds}")
+    for i, load in enumerate(getattr(scene.loads, "pressure", ())):
+        vec(load.box[0], f"loads.pressure[{i}].box")
+        if not box_contains(load.box, mesh.points, tol).any():
+            raise SceneError(f"loads.pressure[{i}].box: no mesh node inside{bounds}")
     for i, p in enumerate(scene.probes):
         vec(p.point, f"probe[{i}].point")
     prescribed_values(scene.fixed, mesh.points, tol)

@@ -296,10 +296,20 @@ class Simulation:
                 elastic = ctx.asm.energy(ctx.u)
             finally:
                 ctx.asm.time = saved
-        kinetic = 0.5 * float(ctx.v @ (model.mass * ctx.v)) if model.solver.kind != "static" else None
+        kinetic = model.mass_matrix.energy(ctx.v) if model.solver.kind != "static" else None
         with np.errstate(over="ignore", invalid="ignore"):
-            work = float(model.f_ext @ ctx.u)
+            work = float(model.f_ext @ ctx.u) + self._pressure_work(model, ctx.u)
         return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
+
+    def _pressure_work(self, model, u) -> float:
+        """Work of the follower pressure (runtime/pressure.py) along the states' path, step by step."""
+        if getattr(model, "pressure", None) is None:
+            return 0.0
+        last, total = getattr(self, "_pressure_path", (None, 0.0))
+        if last is not None and last.shape == u.shape:
+            total += model.pressure.work(last, u)
+        self._pressure_path = (u.copy(), total)
+        return total
 
     def _write(self, step: int, flag):
         if self.writer is None:
