@@ -292,7 +292,7 @@ class Simulation:
                 ctx.asm.time = saved
         kinetic = 0.5 * float(ctx.v @ (model.mass * ctx.v)) if model.solver.kind != "static" else None
         with np.errstate(over="ignore", invalid="ignore"):
-            work = float(model.f_ext @ ctx.u)
+            work = model.motion.work(ctx.u, ctx.t)       # loads with amplitudes: the loads acting now
         return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
 
     def _write(self, step: int, flag):
