@@ -175,7 +175,7 @@ def check_amplitude_use(amplitudes, fixed, loads) -> None:
             continue
         if name not in known:
             listed = ", ".join(list(known) + list(BUILTIN_AMPLITUDES))
-            raise SceneError(f"{key}.amplitude: unknown amplitude {name!r}; known: {listed}")
+            raise SceneError(f"{key}: unknown amplitude {name!r}; known: {listed}")
         used.add(name)
     for i, a in enumerate(amplitudes):
         if a.name not in used:
@@ -184,12 +184,13 @@ def check_amplitude_use(amplitudes, fixed, loads) -> None:
 
 
 def _references(fixed, loads):
-    """(key, amplitude name) of every [[fixed]] entry and load that names one."""
+    """(key, amplitude name) of every [[fixed]] entry and load that names one (loads: any list of
+    items with an `amplitude` attribute, so load kinds added later are covered)."""
     for i, f in enumerate(fixed):
         if getattr(f, "amplitude", None) is not None:
-            yield f"fixed[{i}]", f.amplitude
+            yield f"fixed[{i}].amplitude", f.amplitude
     if getattr(loads, "gravity_amplitude", None) is not None:
-        yield "loads.gravity", loads.gravity_amplitude
+        yield "loads.gravity_amplitude", loads.gravity_amplitude
     counts: dict = {}
     for field in dataclasses.fields(loads):
         items = getattr(loads, field.name)
@@ -200,7 +201,7 @@ def _references(fixed, loads):
             i = counts.get(kind, 0)
             counts[kind] = i + 1
             if getattr(item, "amplitude", None) is not None:
-                yield f"loads.{kind}[{i}]", item.amplitude
+                yield f"loads.{kind}[{i}].amplitude", item.amplitude
 
 
 # ============================================================================== the model's motion
@@ -307,16 +308,17 @@ class Motion:
 
     # -- loads ------------------------------------------------------------------------------------
     def _load_groups(self, loads) -> list:
-        """[(amplitude name, force vector)] of the loads that name an amplitude (the rest: model.f_ext minus these)."""
+        """[(amplitude name or None, force vector)]: the loads of each amplitude, None for those without.
+
+        Empty when no load names an amplitude (then model.f_ext is used as it always was)."""
         names = []
         for _, name in _references([], loads):
             self._amplitude(name, "loads")
             if name not in names:
                 names.append(name)
-        groups = []
-        for name in names:
-            groups.append((name, self._forces_of(self._only(loads, name))))
-        return groups
+        if not names:
+            return []
+        return [(name, self._forces_of(self._only(loads, name))) for name in [None] + names]
 
     @staticmethod
     def _only(loads, name):
@@ -345,12 +347,12 @@ class Motion:
         model = self.model
         if not self._loads:
             return fraction * model.f_ext if self.static else model.f_ext
-        rest = model.f_ext.copy()
-        out = np.zeros_like(rest)
+        out = np.zeros_like(model.f_ext)
         for name, f in self._loads:
-            rest -= f
-            out += self.factor(name, fraction, load=True) * f
-        return out + (fraction if self.static else 1.0) * rest
+            # no amplitude: the load factor itself (static, not clamped, as before) or 1 (dynamic)
+            a = (fraction if self.static else 1.0) if name is None else self.factor(name, fraction, load=True)
+            out += a * f
+        return out
 
     def work(self, u, time: float) -> float:
         """f . u of the loads acting now (default: the full loads f_ext, as the energy balance always used)."""
@@ -377,12 +379,10 @@ class Motion:
         model = self.model
         if not self._loads:
             return model.f_ext
-        rest = model.f_ext.copy()
-        out = np.zeros_like(rest)
+        out = np.zeros_like(model.f_ext)
         for name, f in self._loads:
-            rest -= f
-            out += self._amplitude(name, "loads").peak() * np.abs(f)
-        return out + np.abs(rest)
+            out += (1.0 if name is None else self._amplitude(name, "loads").peak()) * np.abs(f)
+        return out
 
     def peak_displacement(self) -> np.ndarray:
         """The fixed dofs' values at the sampled run fraction where they are largest (default: model.prescribed)."""
