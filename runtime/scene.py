@@ -35,8 +35,18 @@ Schema (every table but [mesh] and [[material]] is optional)::
     box = [[...], [...]]                    # nodes inside: clamped, or
     displacement = [0.0, 0.0, -0.01]        # prescribed (a full vector), on
     components = [2]                        # these components only (default: all)
+    amplitude = "press"                     # optional: an [[amplitude]] scales it over time (default: the ramp)
+    [[fixed]]                               # a rigid motion of the nodes in the box (runtime.motion):
+    box = [[...], [...]]
+    rotation = { axis = [1, 0, 0], point = [1, 0.1, 0.1], angle = 90.0 }   # degrees; 2D: no axis
+    translation = [0.0, 0.0, -0.01]         # and/or; true rotations at every step, scaled by the amplitude
+    [[amplitude]]                           # a piecewise-linear table, end values held outside it
+    name = "press"
+    time = [0.0, 0.5, 1.0]                  # seconds (static runs: the load factor), or factor = [...] (0..1)
+    value = [0.0, 1.0, 0.0]
     [loads]
     gravity = [0.0, 0.0, -9.81]
+    gravity_amplitude = "press"             # optional; force and traction loads take amplitude = "..."
     [[loads.force]]                         # total force, split evenly over the nodes in the box
     box = [[...], [...]]
     value = [0.0, 0.0, -10.0]
