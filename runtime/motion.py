@@ -216,9 +216,6 @@ class Motion:
 
     def __init__(self, model, fixed=(), amplitudes=()):
         self.model = model
-        s = model.solver
-        self.static = s.kind == "static"
-        self.duration = 1.0 if self.static else float(s.dt) * int(s.steps)
         self.amplitudes = dict(BUILTIN_AMPLITUDES)
         self.amplitudes.update({a.name: a for a in amplitudes})
         self.fixed = list(fixed)
@@ -228,6 +225,16 @@ class Motion:
         self.moving = any(_moves(f) or getattr(f, "amplitude", None) is not None for f in self.fixed)
         self._groups = self._fixed_groups() if self.moving else []
         self._loads = self._load_groups(model.loads)
+
+    @property
+    def static(self) -> bool:
+        return self.model.solver.kind == "static"
+
+    @property
+    def duration(self) -> float:
+        """The run's length T: steps x dt (dynamic), 1 (static: the pseudo-time is the load factor)."""
+        s = self.model.solver
+        return 1.0 if self.static else float(s.dt) * int(s.steps)
 
     # -- amplitudes -------------------------------------------------------------------------------
     def _amplitude(self, name, where) -> Amplitude | None:

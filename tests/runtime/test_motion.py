@@ -382,6 +382,16 @@ def test_the_twisted_bar_example_runs_and_turns_its_end_by_90_degrees():
     assert angle == pytest.approx(45.0, abs=3.0)
 
 
+def test_the_dynamic_twisted_bar_example_rings_down_to_the_static_twist():
+    static = Scene.from_toml(ROOT / "examples" / "twisted_bar" / "scene.toml")
+    dynamic = Scene.from_toml(ROOT / "examples" / "twisted_bar" / "dynamic.toml")
+    static.output.dir = dynamic.output.dir = None
+    a, b = Simulation(static).run(), Simulation(dynamic).run()
+    assert b.status == "ok"
+    assert b.energy == pytest.approx(a.energy, rel=1e-3)         # held still, damped: the same equilibrium
+    assert np.allclose(b.probes["end_corner"], a.probes["end_corner"], atol=1e-14)
+
+
 def test_the_tool_press_example_follows_its_path():
     scene = Scene.from_toml(ROOT / "examples" / "tool_press" / "scene.toml")
     scene.output.dir = None
