@@ -11,8 +11,8 @@ The one place that evaluates a scene's boxes and regions on a mesh; the scene ch
 Materials are matched in order, first match wins: a material selects the cells of its
 region ("all", an element type, or an integer cell tag) whose centroid is inside its box
 (when it has one).  Materials and [[fixed]] entries are read by attribute (region, box,
-law, quadrature; box, displacement, components), so the scene's dataclasses and any
-object with those fields work.
+law, quadrature; box, displacement, components, and rotation / translation when present),
+so the scene's dataclasses and any object with those fields work.
 """
 from __future__ import annotations
 
