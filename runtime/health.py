@@ -144,13 +144,15 @@ class HealthMonitor:
     def _energy_scale(self, ctx, duration) -> float:
         model = self.model
         with np.errstate(over="ignore", invalid="ignore"):
-            f = model.f_ext if getattr(model, "pressure", None) is None else (
-                np.abs(model.f_ext) + np.abs(model.pressure.forces(np.zeros(model.n_dofs))))  # pressure at rest
-            load = float(np.sum(np.linalg.norm(model.nodal(f), axis=1))) * model.size
+            mo = getattr(model, "motion", None)              # amplitudes, rigid motions: their peaks
+            f_peak = model.f_ext if mo is None else mo.peak_forces()
+            if getattr(model, "pressure", None) is not None:  # pressure at rest
+                f_peak = np.abs(f_peak) + np.abs(model.pressure.forces(np.zeros(model.n_dofs)))
+            load = float(np.sum(np.linalg.norm(model.nodal(f_peak), axis=1))) * model.size
             boundary = self._boundary_energy(ctx)
             motion = 0.0
             if self.dynamic and duration:
-                v_b = model.prescribed / duration
+                v_b = model.prescribed / duration if mo is None or not mo.moving else mo.peak_velocity()
                 motion = 0.5 * float(np.sum(model.mass[model.fixed_dofs] * v_b ** 2))
         for what, value in (("the loads (total load x body size)", load),
                             ("the prescribed displacements (their elastic energy)", boundary),
@@ -164,10 +166,12 @@ class HealthMonitor:
     def _boundary_energy(self, ctx) -> float:
         """Elastic energy of the prescribed displacements on the fixed nodes alone (every other node at rest)."""
         model = self.model
-        if not np.any(model.prescribed):
+        motion = getattr(model, "motion", None)
+        peak = model.prescribed if motion is None else motion.peak_displacement()
+        if not np.any(peak):
             return 0.0
         u = np.zeros(model.n_dofs)
-        u[model.fixed_dofs] = model.prescribed
+        u[model.fixed_dofs] = peak
         saved = ctx.asm.time
         values, inverted = [], 0
         for scale in (1.0, 1e-3):          # the small one: the linearised energy, defined for every law

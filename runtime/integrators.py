@@ -8,7 +8,9 @@
 Conventions: u, v are global node-major vectors; f_int = -dW/du comes from the
 kernels, K = d2W/du2 = -df_int/du.  Fixed dofs follow the model's prescribed
 displacement: ramped with the load factor (static) or linearly over the whole
-run (dynamic), so their velocity is constant; clamped dofs stay at zero.
+run (dynamic), so their velocity is constant; clamped dofs stay at zero.  Amplitude tables,
+rigid motions and time-varying loads come from runtime.motion through prescribed(s),
+external_force(s) and boundary_velocity(u, t, h) (s: the run fraction, t / duration).
 """
 from __future__ import annotations
 
@@ -267,7 +269,12 @@ class _Integrator:
             raise TensormassError(f"solver.steps must be >= 1, got {self.n_steps}")
 
     def prescribed(self, fraction: float) -> np.ndarray:
-        return min(max(fraction, 0.0), 1.0) * self.model.prescribed
+        """Values of the fixed dofs at run fraction s (the ramp, amplitudes, rigid motions: runtime.motion)."""
+        return self.model.motion.displacement(fraction)
+
+    def external_force(self, fraction: float) -> np.ndarray:
+        """External loads at run fraction s (static default: s f_ext; dynamic default: f_ext; amplitudes)."""
+        return self.model.motion.forces(fraction)
 
 
 class Static(_Integrator):
@@ -284,7 +291,7 @@ class Static(_Integrator):
     def step(self, k: int) -> dict:
         ctx, lam = self.ctx, k / self.n_steps
         before = ctx.newton_iterations
-        potential = _Potential(ctx.asm, lam * self.model.f_ext, lam)
+        potential = _Potential(ctx.asm, self.external_force(lam), lam)
         ctx.u, _ = newton(ctx, potential, ctx.u, self.prescribed(lam),
                           f"static: load step {k}/{self.n_steps}")
         ctx.t = lam
@@ -304,9 +311,17 @@ class _Dynamic(_Integrator):
         self.duration = self.dt * self.n_steps
         self.mass = self.model.mass_matrix        # runtime.mass.MassMatrix: M @ x, M.add_to(...)
 
-    def boundary_velocity(self):
-        """Velocity of the fixed dofs under the linear ramp over the run."""
-        return self.model.prescribed / self.duration
+    def boundary_velocity(self, u=None, t=None, h=None):
+        """Velocity of the fixed dofs over the step from t to t + h (u: the state at t).
+
+        The linear ramp's constant velocity; with rigid motions or amplitudes the finite
+        difference that lands the fixed dofs on the motion at t + h (runtime.motion).
+        """
+        motion = self.model.motion
+        if motion.moving and u is None:
+            raise TensormassError(f"{self.kind}: moving boundaries need boundary_velocity(u, t, h)")
+        s1 = None if t is None else (t + h) / self.duration
+        return motion.boundary_velocity(u, s1, h)
 
     def step(self, k: int) -> dict:
         ctx = self.ctx
@@ -346,12 +361,12 @@ class ImplicitEuler(_Dynamic):
         ctx = self.ctx
         f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
         Kv = ctx.asm.matrix(K) @ v
-        f = f_int + self.model.f_ext - self.alpha * (self.mass @ v) - self.beta * Kv
+        f = f_int + self.external_force((t + h) / self.duration) - self.alpha * (self.mass @ v) - self.beta * Kv
         A = self.mass.added((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
             self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
-        dv_c = self.boundary_velocity() - v[self.model.fixed_dofs]
+        dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
         # CG starts from the previous step's dv: consecutive steps change v alike
         dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv)
         self._last_dv = dv if h == self.dt else None
@@ -370,7 +385,8 @@ class BackwardEuler(_Dynamic):
         K_n = None
         if self.beta:
             K_n = ctx.asm.matrix(self.beta * ctx.asm.stiffness(u, ctx.project is True))
-        potential = _IncrementalPotential(ctx.asm, self.model.f_ext, self.mass, h, u, v, self.alpha, K_n)
+        potential = _IncrementalPotential(ctx.asm, self.external_force((t + h) / self.duration), self.mass, h, u, v,
+                                          self.alpha, K_n)
         target = self.prescribed((t + h) / self.duration)
         u1, _ = newton(ctx, potential, u, target, f"backward_euler: time {t + h:.6g}")
         return u1, (u1 - u) / h
@@ -398,14 +414,14 @@ class Explicit(_Dynamic):
     def single(self, u, v, t, h):
         ctx, free, fixed = self.ctx, self.model.free_dofs, self.model.fixed_dofs
         f_int = ctx.asm.forces(u)
-        f = f_int + self.model.f_ext - self.alpha * self.mass * v
+        f = f_int + self.external_force(t / self.duration) - self.alpha * self.mass * v
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
         if self.beta:
             f -= self.beta * _stiffness_times(ctx.asm, u, v, f_int, self.model.size)
         v1 = v.copy()
         v1[free] += h * self.inv_mass[free] * f[free]
-        v1[fixed] = self.boundary_velocity()
+        v1[fixed] = self.boundary_velocity(u, t, h)
         return u + h * v1, v1
 
     def step(self, k: int) -> dict:

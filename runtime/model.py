@@ -32,6 +32,7 @@ from .mass import MassMatrix
 from .pressure import FollowerPressure
 from .mesh import Mesh, boundary_faces, check_mesh
 from .mesh import face_measure as _face_measure  # face types: the element table
+from .motion import Motion
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, switch_parameters)
 from .scene import Loads, Output, Solver
@@ -138,7 +139,7 @@ class Model:
 
     def __init__(self, mesh: Mesh, materials, fixed=(), loads: Loads | None = None, probes=(),
                  solver: Solver | None = None, output: Output | None = None, name: str = "model",
-                 check: bool = True, adapt=(), max_memory=None):
+                 check: bool = True, adapt=(), max_memory=None, amplitudes=()):
         start = time.perf_counter()
         materials, adapt = list(materials), list(adapt)
         self.solver = solver if solver is not None else Solver()
@@ -172,6 +173,9 @@ class Model:
         self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
         self.f_ext = self._external_forces()
         self.pressure = self._pressure_loads()    # runtime.pressure.FollowerPressure or None
+        # prescribed displacements and loads over time: amplitudes, rigid motions (runtime.motion)
+        self.amplitudes = list(amplitudes)
+        self.motion = Motion(self, list(fixed), self.amplitudes)
         self.probes = {p.name: self._nearest_node(p.point) for p in probes}
         self.scene = None
         self.build_time = time.perf_counter() - start
@@ -183,7 +187,7 @@ class Model:
         mesh = scene_mesh(scene) if built else mesh
         model = cls(mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver,
                     scene.output, scene.name, check=not built, adapt=getattr(scene, "adapt", ()),
-                    max_memory=getattr(scene, "max_memory", None))
+                    max_memory=getattr(scene, "max_memory", None), amplitudes=getattr(scene, "amplitudes", ()))
         # the scene's estimate covers the whole run (refinement included) when it has one
         model.estimate = getattr(scene, "estimate", None) or model.estimate
         model.scene = scene
@@ -193,7 +197,7 @@ class Model:
         """The same scene on another mesh (after refinement): parts, masses, constraints and loads anew."""
         fixed, probes = self._specs
         model = Model(mesh, self.materials, fixed, self.loads, probes, self.solver, self.output, self.name,
-                      adapt=self.adapt, max_memory=self.max_memory)
+                      adapt=self.adapt, max_memory=self.max_memory, amplitudes=self.amplitudes)
         model.scene = self.scene
         return model
 
@@ -302,7 +306,8 @@ class Model:
             if fx.displacement is not None:
                 self._vector(fx.displacement, f"fixed[{i}].displacement", max(self.n_load, int(comps.max()) + 1))
         # entries that give one dof different values are refused there (the order would decide)
-        target = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node)[0].ravel()
+        value, self.fixed_owner = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node)
+        target = value.ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
         used = np.zeros(self.n_points, bool)

@@ -11,8 +11,8 @@ The one place that evaluates a scene's boxes and regions on a mesh; the scene ch
 Materials are matched in order, first match wins: a material selects the cells of its
 region ("all", an element type, or an integer cell tag) whose centroid is inside its box
 (when it has one).  Materials and [[fixed]] entries are read by attribute (region, box,
-law, quadrature; box, displacement, components), so the scene's dataclasses and any
-object with those fields work.
+law, quadrature; box, displacement, components, and rotation / translation when present),
+so the scene's dataclasses and any object with those fields work.
 """
 from __future__ import annotations
 
@@ -189,17 +189,25 @@ def prescribed_values(fixed, points, tol: float, components: int | None = None):
     dim = dim if components is None else int(components)
     value = np.full((n, dim), np.nan)
     owner = np.full((n, dim), -1, dtype=np.int64)
+    # a rigid motion (runtime.motion) gives every node its own value: it may share no dof with another entry
+    moves = np.array([getattr(f, "rotation", None) is not None or getattr(f, "translation", None) is not None
+                      for f in fixed] + [False])
     for i, f in enumerate(fixed):
         nodes = np.flatnonzero(box_contains(f.box, points, tol))
         disp = np.zeros(dim) if f.displacement is None else np.asarray(f.displacement, dtype=float)[:dim]
         for c in range(dim) if f.components is None else f.components:
             c = int(c)
             old = value[nodes, c]
-            clash = np.flatnonzero(~np.isnan(old) & (old != disp[c]))
+            clash = np.flatnonzero(~np.isnan(old) & ((old != disp[c]) | moves[i] | moves[owner[nodes, c]]))
             if clash.size:
                 node = int(nodes[clash[0]])
                 j = int(owner[node, c])
                 where = ", ".join(f"{float(x):g}" for x in points[node])
+                if moves[i] or moves[j]:
+                    raise SceneError(f"fixed[{i}]: prescribes component {c} at node {node} ([{where}]) where "
+                                     f"fixed[{j}] prescribes it too, and fixed[{i if moves[i] else j}] is a rigid "
+                                     f"motion (rotation/translation) ({clash.size} node(s) in both); narrow one "
+                                     "box, or use components = [...] so that each component is prescribed once")
                 raise SceneError(f"fixed[{i}]: prescribes component {c} = {disp[c]:g} at node {node} ([{where}]) "
                                  f"where fixed[{j}] prescribes {old[clash[0]]:g} ({clash.size} node(s) in "
                                  "both boxes); the boxes overlap with different values: narrow one box, or "

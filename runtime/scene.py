@@ -35,8 +35,18 @@ Schema (every table but [mesh] and [[material]] is optional)::
     box = [[...], [...]]                    # nodes inside: clamped, or
     displacement = [0.0, 0.0, -0.01]        # prescribed (a full vector), on
     components = [2]                        # these components only (default: all)
+    amplitude = "press"                     # optional: an [[amplitude]] scales it over time (default: the ramp)
+    [[fixed]]                               # a rigid motion of the nodes in the box (runtime.motion):
+    box = [[...], [...]]
+    rotation = { axis = [1, 0, 0], point = [1, 0.1, 0.1], angle = 90.0 }   # degrees; 2D: no axis
+    translation = [0.0, 0.0, -0.01]         # and/or; true rotations at every step, scaled by the amplitude
+    [[amplitude]]                           # a piecewise-linear table, end values held outside it
+    name = "press"
+    time = [0.0, 0.5, 1.0]                  # seconds (static runs: the load factor), or factor = [...] (0..1)
+    value = [0.0, 1.0, 0.0]
     [loads]
     gravity = [0.0, 0.0, -9.81]
+    gravity_amplitude = "press"             # optional; force and traction loads take amplitude = "..."
     [[loads.force]]                         # total force, split evenly over the nodes in the box
     box = [[...], [...]]
     value = [0.0, 0.0, -10.0]
@@ -69,6 +79,7 @@ from .. import laws
 from ..generator.catalogue import entries
 from .errors import SceneError
 from .mesh import BAR_ELEMENTS, COORD_MAX
+from .motion import Amplitude, Rotation, check_amplitude_use, parse_amplitude, parse_rotation
 from .regions import (assign_materials as _assign_materials, box_contains, box_tolerance, prescribed_values,
                       reachable_laws, switch_applies, switch_parameters)
 from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, check_against_mesh
@@ -114,6 +125,9 @@ class Fixed:
     box: tuple                            # nodes inside are constrained
     displacement: tuple | None = None     # None: clamped (zero); else prescribed displacement vector
     components: tuple | None = None       # which components (0, 1, 2) are constrained; None = all
+    amplitude: str | None = None          # [[amplitude]] name scaling the displacement/motion; None: the ramp
+    rotation: Rotation | None = None      # rigid motion (runtime.motion): rotation about an axis ...
+    translation: tuple | None = None      # ... and/or translation, applied as true rotations at every step
 
 
 @dataclass
@@ -121,6 +135,7 @@ class NodalLoad:
     box: tuple                            # force applied to the nodes inside the box
     force: tuple                          # total force, split evenly over those nodes
     kind: str = "force"                   # "force" (total, split over nodes) or "traction" (per unit area of boundary faces inside the box)
+    amplitude: str | None = None          # [[amplitude]] name; None: ramp (static), constant (dynamic)
 
 
 @dataclass
@@ -134,6 +149,7 @@ class Loads:
     gravity: tuple = (0.0, 0.0, 0.0)
     nodal: list = field(default_factory=list)    # [NodalLoad]
     pressure: list = field(default_factory=list)  # [PressureLoad] (runtime/pressure.py)
+    gravity_amplitude: str | None = None  # [[amplitude]] name for gravity (runtime.motion)
 
 
 @dataclass
@@ -204,6 +220,7 @@ class Scene:
     description: str = ""
     source: str | None = None             # the scene file, when read from one
     max_memory: int | str | None = None   # memory limit (bytes or "8G"); None: see runtime.resources
+    amplitudes: list = field(default_factory=list)  # [Amplitude] (runtime.motion)
 
     # -- reading ------------------------------------------------------------------------------
     @classmethod
@@ -289,12 +306,14 @@ class Scene:
 
 # ============================================================================== parsing
 
-_TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt")
+_TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
+        "amplitude")
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
-_FIXED = ("box", "displacement", "components")
-_LOADS = ("gravity", "force", "traction", "pressure")
+_FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation")
+_LOADS = ("gravity", "force", "traction", "pressure", "gravity_amplitude")
 _LOAD = ("box", "value")
+_LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass")
@@ -446,6 +465,7 @@ class _Parser:
                      for i, t in enumerate(self.tables(data["material"], "material"))]
         fixed = [self.fixed(t, f"fixed[{i}]") for i, t in enumerate(self.tables(data.get("fixed", []), "fixed"))]
         loads = self.loads(self.table(data.get("loads", {}), "loads"))
+        amplitudes = self.amplitudes(data.get("amplitude", []), fixed, loads)
         solver = self.solver(self.table(data.get("solver", {}), "solver"))
         probes = [self.probe(t, f"probe[{i}]", i) for i, t in enumerate(self.tables(data.get("probe", []), "probe"))]
         names = [p.name for p in probes]
@@ -461,7 +481,7 @@ class _Parser:
                              "(without constraints the stiffness matrix is singular)")
         scene = Scene(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver,
                       probes=probes, output=output, adapt=adapt, name=name, description=description,
-                      max_memory=max_memory)
+                      max_memory=max_memory, amplitudes=amplitudes)
         if load_mesh:
             scene.validate(scene.load_mesh())
         return scene
@@ -596,7 +616,31 @@ class _Parser:
                                  f"(use 0..{dim - 1})")
             if len(set(comps)) != len(comps):
                 raise SceneError(f"{key}.components: repeated component in {list(comps)}")
-        return Fixed(box=box, displacement=disp, components=comps)
+        fixed = Fixed(box=box, displacement=disp, components=comps)
+        self.motion(t, key, fixed, len(box[0]))
+        return fixed
+
+    def motion(self, t, key, fixed, dim) -> None:
+        """amplitude, rotation and translation of a [[fixed]] entry (runtime.motion)."""
+        if "amplitude" in t:
+            fixed.amplitude = self.string(t["amplitude"], f"{key}.amplitude")
+        if "rotation" in t:
+            fixed.rotation = parse_rotation(self, t["rotation"], f"{key}.rotation", dim)
+        if "translation" in t:
+            fixed.translation = self.vector(t["translation"], f"{key}.translation", dim=dim)
+        if fixed.displacement is not None and (fixed.rotation is not None or fixed.translation is not None):
+            raise SceneError(f"{key}.displacement: not with rotation/translation (a rigid motion); "
+                             "give the displacement as translation = [...]")
+
+    def amplitudes(self, raw, fixed, loads) -> list:
+        """[[amplitude]] tables; every name used exists and every table is used."""
+        amps = [parse_amplitude(self, t, f"amplitude[{i}]") for i, t in enumerate(self.tables(raw, "amplitude"))]
+        names = [a.name for a in amps]
+        dup = next((n for n in names if names.count(n) > 1), None)
+        if dup is not None:
+            raise SceneError(f"amplitude[{names.index(dup, names.index(dup) + 1)}].name: duplicate amplitude name {dup!r}")
+        check_amplitude_use(amps, fixed, loads)
+        return amps
 
     def loads(self, t) -> Loads:
         self.keys(t, "loads", _LOADS)
@@ -605,13 +649,15 @@ class _Parser:
         for kind in ("force", "traction"):
             for i, lt in enumerate(self.tables(t.get(kind, []), f"loads.{kind}")):
                 key = f"loads.{kind}[{i}]"
-                self.keys(lt, key, _LOAD)
+                self.keys(lt, key, _LOAD, _LOAD_OPTIONAL)
                 for k in _LOAD:
                     if k not in lt:
                         raise SceneError(f"{key}.{k}: missing")
                 box = self.box(lt["box"], f"{key}.box")
                 value = self.vector(lt["value"], f"{key}.value", dim=len(box[0]))
                 nodal.append(NodalLoad(box=box, force=value, kind=kind))
+                if "amplitude" in lt:
+                    nodal[-1].amplitude = self.string(lt["amplitude"], f"{key}.amplitude")
         pressure = []
         for i, lt in enumerate(self.tables(t.get("pressure", []), "loads.pressure")):
             key = f"loads.pressure[{i}]"
@@ -623,7 +669,10 @@ class _Parser:
                                          value=self.number(lt["value"], f"{key}.value")))
         if gravity is None:
             gravity = (0.0,) * (self.dim or 3)
-        return Loads(gravity=gravity, nodal=nodal, pressure=pressure)
+        out = Loads(gravity=gravity, nodal=nodal, pressure=pressure)
+        if "gravity_amplitude" in t:
+            out.gravity_amplitude = self.string(t["gravity_amplitude"], "loads.gravity_amplitude")
+        return out
 
     def solver(self, t) -> Solver:
         self.keys(t, "solver", _SOLVER)

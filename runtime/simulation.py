@@ -298,7 +298,8 @@ class Simulation:
                 ctx.asm.time = saved
         kinetic = model.mass_matrix.energy(ctx.v) if model.solver.kind != "static" else None
         with np.errstate(over="ignore", invalid="ignore"):
-            work = float(model.f_ext @ ctx.u) + self._pressure_work(model, ctx.u)
+            # loads with amplitudes: the loads acting now; follower pressure: its work along the path
+            work = model.motion.work(ctx.u, ctx.t) + self._pressure_work(model, ctx.u)
         return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
 
     def _pressure_work(self, model, u) -> float:
