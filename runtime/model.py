@@ -23,6 +23,7 @@ from .errors import ElementError, TensormassError
 from .integrators import outputs_for
 from .mesh import Mesh, boundary_faces, check_mesh
 from .mesh import face_measure as _face_measure  # face types: the element table
+from .probes import locate_point
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, switch_parameters)
 from .scene import Loads, Output, Solver
@@ -153,7 +154,7 @@ class Model:
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
         self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
         self.f_ext = self._external_forces()
-        self.probes = {p.name: self._nearest_node(p.point) for p in probes}
+        self.probes = {p.name: self._point_probe(p) for p in probes}      # runtime.probes.PointProbe
         self.scene = None
         self.build_time = time.perf_counter() - start
 
@@ -318,9 +319,9 @@ class Model:
         if not hit:
             raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
 
-    def _nearest_node(self, point) -> int:
-        p = self._vector(point, "probe point")
-        return int(np.argmin(np.sum((self.mesh.points - p) ** 2, axis=1)))
+    def _point_probe(self, probe):
+        """The cell holding the probe's point and its shape functions there (runtime.probes)."""
+        return locate_point(self.mesh, self._vector(probe.point, f"probe {probe.name!r} point"), probe.name)
 
     # -- helpers for the integrators ------------------------------------------------------------
     def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
@@ -363,4 +364,4 @@ class Model:
 
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
-        return {name: U[node].tolist() for name, node in self.probes.items()}
+        return {name: probe.value(U).tolist() for name, probe in self.probes.items()}
