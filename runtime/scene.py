@@ -44,9 +44,9 @@ Schema (every table but [mesh] and [[material]] is optional)::
     box = [[...], [...]]
     value = [0.0, 0.0, -100.0]
     [solver]                                # the Solver fields below
-    [[probe]]
+    [[probe]]                               # u interpolated at the point (runtime.probes)
     name = "tip"
-    point = [1.2, 0.1, 0.1]
+    point = [1.2, 0.1, 0.1]                 # inside the body or on it within 10 % of a cell
     [output]
     dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10

@@ -215,14 +215,14 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
             scene0 = Scene.from_dict(d0, base_dir=path.parent) if files is None else \
                 files.scene(d0, e, 0, path.parent)
         except SceneError as exc:
-            own = (base.mesh.element if files is None else "+".join(files.mesh0.cell_types()),
+            own = (base.mesh.element if files is None else "+".join(files.solid_types(files.mesh0)),
                    "+".join(dict.fromkeys(m.law for m in base.materials)),
                    "+".join(dict.fromkeys(m.quadrature for m in base.materials)))
             label = " / ".join(x if x is not None else o for x, o in zip((e, l, q), own))
             notes.append(f"- skipped {label}: {exc}")
             progress(f"  skipped {label}: {exc}")
             continue
-        element = scene0.mesh.element if files is None else "+".join(files.mesh(e, 0).cell_types())
+        element = scene0.mesh.element if files is None else "+".join(files.solid_types(files.mesh(e, 0)))
         law = "+".join(dict.fromkeys(m.law for m in scene0.materials))
         quad = "+".join(dict.fromkeys(m.quadrature for m in scene0.materials))
         analytic = _scene_analytic(scene0)

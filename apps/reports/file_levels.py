@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 
+from ... import elements as _types
 from ...runtime import resources
 from ...runtime.errors import TensormassError
 from ...runtime.scene import Scene
@@ -35,13 +36,15 @@ class FileLevels:
     def __init__(self, base: Scene, path, elements=None, levels=None, default_levels: int = 3):
         self.path = path
         self.mesh0 = base.load_mesh()
-        types = self.mesh0.cell_types()
+        types = self.solid_types(self.mesh0)
+        # lower-dimensional simplices (boundary faces kept from the file) are refined with the cells
+        lower = [t for t in self.mesh0.cell_types() if t not in types]
         self.file = base.mesh.file
         counts = ", ".join(f"{sum(len(b) for b in self.mesh0.blocks if b.type == t)} {t}" for t in types)
         self.kind = None                                   # "linear" / "quadratic" simplices, or None
-        if len(types) == 1 and types[0] in QUADRATIC_OF:
+        if len(types) == 1 and types[0] in QUADRATIC_OF and all(t in QUADRATIC_OF for t in lower):
             self.kind, self.linear, self.quadratic = "linear", types[0], QUADRATIC_OF[types[0]]
-        elif len(types) == 1 and types[0] in LINEAR_OF:
+        elif len(types) == 1 and types[0] in LINEAR_OF and all(t in LINEAR_OF for t in lower):
             self.kind, self.linear, self.quadratic = "quadratic", LINEAR_OF[types[0]], types[0]
         wanted = list(dict.fromkeys(elements or []))
         if self.kind is None:
@@ -76,6 +79,11 @@ class FileLevels:
                      + f"); elements {', '.join(self.elements)}"
                      + (f" ({how})" if any(e != types[0] for e in self.elements) else ""))
         self._cache = {}
+
+    @staticmethod
+    def solid_types(mesh) -> list:
+        """The cell types of the body (topological dimension = the mesh's), in block order."""
+        return [t for t in mesh.cell_types() if _types.get(t).dim == mesh.dim]
 
     def mesh(self, element, level: int):
         """The mesh of one element at one level (built once)."""

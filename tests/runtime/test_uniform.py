@@ -104,3 +104,17 @@ def test_other_cell_types_are_named():
         refine_uniform(generate_bar(element="hexahedron"))
     with pytest.raises(MeshError, match="raising to quadratic.*tetra10 cells"):
         to_quadratic(generate_bar(element="tetra10"))
+
+
+def test_boundary_faces_kept_as_cells_are_refined_with_the_body():
+    """A tetra mesh with its boundary triangles as a block (mesh tags of lower dimension): the refined
+    triangles are exactly the boundary faces of the refined tetrahedra (shared new nodes)."""
+    from tensormass.runtime.mesh import CellBlock, Mesh, boundary_faces
+    body = generate_bar((1.0, 0.2, 0.2), (2, 1, 1), "tetra")
+    faces = np.array([nodes for _, _, nodes in boundary_faces(body)])
+    mesh = Mesh(body.points, body.blocks + [CellBlock("triangle", faces, np.full(len(faces), 9))])
+    for fine, k in ((refine_uniform(mesh), 3), (to_quadratic(refine_uniform(mesh)), 6)):
+        solid = Mesh(fine.points, fine.blocks[:1])
+        expected = {tuple(sorted(n)) for _, _, n in boundary_faces(solid)}
+        got = {tuple(sorted(c)) for c in fine.blocks[1].cells}
+        assert fine.blocks[1].cells.shape == (4 * len(faces), k) and got == expected
