@@ -107,3 +107,15 @@ def test_a_probe_within_the_tolerance_reads_the_nearest_point_of_the_body():
     assert near.value(U)[2] == pytest.approx(-1.0)                  # the value at the tip face
     with pytest.raises(ProbeError):
         locate_point(mesh, (1.0 + 1.5 * tol, 0.1, 0.1), "far")
+
+
+def test_the_model_reports_interpolated_probes_and_refuses_points_off_the_body():
+    from tensormass.runtime.model import Model
+    from tensormass.runtime.scene import Material, Probe
+    mesh = generate_bar((1.0, 0.2, 0.2), (4, 1, 1), "tetra10")
+    mat = [Material(law="hooke", E=1e6, nu=0.3)]
+    model = Model(mesh, mat, probes=[Probe("mid", (0.3, 0.05, 0.15))])
+    u = (mesh.points ** 2 @ np.diag([1.0, 2.0, 3.0])).ravel()       # quadratic: exact in tetra10
+    np.testing.assert_allclose(model.probe_values(u)["mid"], [0.09, 0.005, 0.0675], rtol=1e-10)
+    with pytest.raises(ProbeError, match=r"^probe 'far' at \[5, 0\.1, 0\.1\] is not on the body: it is 4 m outside"):
+        Model(mesh, mat, probes=[Probe("far", (5.0, 0.1, 0.1))])
