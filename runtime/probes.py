@@ -277,6 +277,8 @@ def _triangle_distance(T, p):
 
 
 def _outside_message(mesh, p, name) -> str:
+    if not mesh.n_points or not _solid_blocks(mesh):
+        return f"probe {name!r} at {_fmt(p)} is not on the body: the mesh has no cells of its dimension"
     d2 = np.sum((mesh.points - p) ** 2, axis=1)
     node = int(np.argmin(d2))
     dist = surface_distance(mesh, p)
