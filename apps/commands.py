@@ -114,6 +114,9 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
     summary, stopped = _simulate(Simulation, scene, writer, progress)
     data = _summary_data(summary, stopped, scene, mesh, writer, out_dir)
+    if data["output"] is not None:        # the path rule (runtime/paths.py), said where the files went
+        data["output"]["dir_from"] = ("given on the command line, relative to the working directory" if out is not None else
+                                      "[output] dir, relative to the scene file")
     if json_path is not None:
         write_summary(json_path, data)
         data["output_json"] = str(json_path)
@@ -327,7 +330,8 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     o = data.get("output")
     if o:
         where = o.get("pvd") or f"{o['dir']} (no frame written)"
-        rows.append(("output", f"{where} ({o.get('frames', 0)} frame(s), every {o.get('every')} step(s))"))
+        rows.append(("output", f"{where} ({o.get('frames', 0)} frame(s), every {o.get('every')} step(s)"
+                               + (f"; {o['dir_from']})" if o.get("dir_from") else ")")))
     else:
         rows.append(("output", "none (set [output] dir or --out)"))
     if json_path is not None:

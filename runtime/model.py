@@ -33,6 +33,7 @@ from .pressure import FollowerPressure
 from .mesh import Mesh, boundary_faces, check_mesh
 from .mesh import face_measure as _face_measure  # face types: the element table
 from .motion import Motion
+from .probes import locate_point
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, switch_parameters)
 from .scene import Loads, Output, Solver
@@ -176,7 +177,7 @@ class Model:
         # prescribed displacements and loads over time: amplitudes, rigid motions (runtime.motion)
         self.amplitudes = list(amplitudes)
         self.motion = Motion(self, list(fixed), self.amplitudes)
-        self.probes = {p.name: self._nearest_node(p.point) for p in probes}
+        self.probes = {p.name: self._point_probe(p) for p in probes}      # runtime.probes.PointProbe
         self.scene = None
         self.build_time = time.perf_counter() - start
 
@@ -370,9 +371,9 @@ class Model:
         pressure.symmetric = pressure.closed or self.solver.linear == "cg"
         return pressure
 
-    def _nearest_node(self, point) -> int:
-        p = self._vector(point, "probe point", self.dim)
-        return int(np.argmin(np.sum((self.mesh.points - p) ** 2, axis=1)))
+    def _point_probe(self, probe):
+        """The cell holding the probe's point and its shape functions there (runtime.probes)."""
+        return locate_point(self.mesh, self._vector(probe.point, f"probe {probe.name!r} point", self.dim), probe.name)
 
     # -- helpers for the integrators ------------------------------------------------------------
     def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
@@ -415,7 +416,7 @@ class Model:
 
     def probe_values(self, u: np.ndarray) -> dict:
         U = self.nodal(u)
-        return {name: U[node].tolist() for name, node in self.probes.items()}
+        return {name: probe.value(U).tolist() for name, probe in self.probes.items()}
 
     # -- dofs that are not (only) displacements: bars, springs, shells (runtime.dofs) -------------
     def nodal(self, u: np.ndarray) -> np.ndarray:

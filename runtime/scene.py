@@ -57,11 +57,11 @@ Schema (every table but [mesh] and [[material]] is optional)::
     box = [[...], [...]]                    # normal to the deformed surface; > 0 pushes inward
     value = 2000.0
     [solver]                                # the Solver fields below (mass = "lumped" | "consistent")
-    [[probe]]
+    [[probe]]                               # u interpolated at the point (runtime.probes)
     name = "tip"
-    point = [1.2, 0.1, 0.1]
+    point = [1.2, 0.1, 0.1]                 # inside the body or on it within 10 % of a cell
     [output]
-    dir = "out"                             # relative to the working directory
+    dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
@@ -80,6 +80,7 @@ from ..generator.catalogue import entries
 from .errors import SceneError
 from .mesh import BAR_ELEMENTS, COORD_MAX
 from .motion import Amplitude, Rotation, check_amplitude_use, parse_amplitude, parse_rotation
+from .paths import scene_path
 from .regions import (assign_materials as _assign_materials, box_contains, box_tolerance, prescribed_values,
                       reachable_laws, switch_applies, switch_parameters)
 from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, check_against_mesh
@@ -354,6 +355,7 @@ def _fmt(value) -> str:
 class _Parser:
     def __init__(self, base_dir):
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
+        self.scene_dir = Path(base_dir) if base_dir is not None else None   # None: paths stay as written
         self.dim = None             # 2 or 3 once known
 
     # -- primitives -------------------------------------------------------------------------
@@ -495,9 +497,7 @@ class _Parser:
             if extra:
                 raise SceneError(f"mesh.{extra[0]}: only used with generate = \"bar\", not with mesh.file")
             raw = self.string(t["file"], "mesh.file")
-            path = Path(raw).expanduser()
-            if not path.is_absolute():
-                path = self.base_dir / path
+            path = Path(scene_path(raw, self.base_dir))
             if not path.is_file():
                 raise SceneError(f"mesh.file: mesh file not found: {path} (relative paths are relative to "
                                  "the scene file)")
@@ -774,6 +774,8 @@ class _Parser:
             out.dir = self.string(t["dir"], "output.dir")
             if not out.dir.strip():
                 raise SceneError("output.dir: must not be empty (leave it out for no output)")
+            # like mesh.file: relative to the scene file's folder (runtime/paths.py: the path rule)
+            out.dir = scene_path(out.dir, self.scene_dir)
         if "every" in t:
             out.every = self.integer(t["every"], "output.every", 1)
         return out

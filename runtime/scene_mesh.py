@@ -10,7 +10,6 @@ each cell come from runtime.regions.  Errors name the scene key (SceneError).
 """
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,16 +20,16 @@ from . import resources
 from .errors import SceneError, TensormassError
 from . import mesh as _mesh          # module attribute lookups: tests stand in for read_mesh, generate_bar
 from .mesh import MeshError, check_coordinates
+from .probes import PROBE_CELL_FRACTION, ProbeError, locate_point
 from .refine import REFINABLE_TYPES
 from .regions import (assign_materials, box_contains, box_tolerance, check_unused_materials, prescribed_values,
                       reachable_laws, switch_parameters)
 
 __all__ = ["load_mesh", "scene_mesh", "build_mesh", "check_against_mesh", "catalogue_check", "PROBE_TOLERANCE"]
 
-# A probe reports the displacement of its nearest node: farther than this share of the
-# body's size (bounding box diagonal) from every node, and farther than the largest cell,
-# it is not on the body.
-PROBE_TOLERANCE = 0.1
+# A probe reports the displacement interpolated at its point; outside the body by more than
+# this share of the nearest cell's size it is refused (runtime.probes: the rule and its reasons).
+PROBE_TOLERANCE = PROBE_CELL_FRACTION
 
 
 # ============================================================================== building the mesh
@@ -178,35 +177,12 @@ def check_against_mesh(scene, mesh) -> None:
 
 
 def _check_probes(scene, mesh) -> None:
-    """A probe reports its nearest node: refuse probes that are not on the body."""
-    if not scene.probes or not mesh.n_points:
-        return
-    size = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
-    cell = None                           # largest cell diagonal, computed only when needed
+    """Every probe point must lie inside the body or on it within a tolerance (runtime.probes)."""
     for i, p in enumerate(scene.probes):
-        d2 = np.sum((mesh.points - np.asarray(p.point, dtype=float)) ** 2, axis=1)
-        node = int(np.argmin(d2))
-        dist = math.sqrt(float(d2[node]))
-        if dist <= PROBE_TOLERANCE * size:
-            continue
-        cell = _largest_cell(mesh) if cell is None else cell
-        if dist <= cell:                  # inside a coarse cell: its nodes are all that far
-            continue
-        at = ", ".join(f"{float(x):g}" for x in mesh.points[node])
-        raise SceneError(f"probe[{i}].point: probe {p.name!r} at {list(p.point)} is {dist:.3g} m from the nearest "
-                         f"mesh node (node {node} at [{at}]), more than {PROBE_TOLERANCE:.0%} of the body's size "
-                         f"({size:.3g} m) and than its largest cell ({cell:.3g} m): it is not on the body, and "
-                         "a probe reports the displacement of its nearest node")
-
-
-def _largest_cell(mesh) -> float:
-    """Largest bounding-box diagonal of a cell (in chunks: no (n_cells, k, dim) copy of a big mesh)."""
-    big = 0.0
-    for blk in mesh.blocks:
-        for start in range(0, len(blk), 65536):
-            x = mesh.points[blk.cells[start:start + 65536]]
-            big = max(big, float(np.sqrt(np.sum((x.max(axis=1) - x.min(axis=1)) ** 2, axis=1)).max()))
-    return big
+        try:
+            locate_point(mesh, p.point, p.name)
+        except ProbeError as exc:
+            raise SceneError(f"probe[{i}].point: {exc}") from None
 
 
 def _check_adapt(scene, mesh, which) -> None:

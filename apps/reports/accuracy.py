@@ -37,6 +37,12 @@ dofs; ties: the first listed), error_reference = |u - u_ref| / |u_ref| (0 for th
 itself); error_analytic is filled in only when the scene is a 3D generated bar under gravity
 along -z with its first probe at x = L.
 
+With SCENE whose mesh is a file (mesh.file), the levels are uniform refinements of the file's
+mesh instead (file_levels.py): triangle / tetra files are refined (every edge halved per level)
+and swept as read and raised to triangle6 / tetra10 (straight-sided midside nodes) by default;
+triangle6 / tetra10 files are refined through their (possibly curved) cells' maps; other cell
+types are swept on the mesh as read (one level).  The `cells` column is then the cell count.
+
 Timings come from the run Summary: time_setup (model build, kernel loading, assembly
 pattern; every combination is warmed up once on its coarsest mesh before it is measured, so
 one-off numba compilation is not in it, and is reported apart in report.md), time_assembly,
@@ -65,6 +71,7 @@ from ...runtime.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
+from .file_levels import FileLevels
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
@@ -181,9 +188,6 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
         raise TensormassError(f"cannot read scene file {path}: {exc}") from None
     data = {**data, "name": data.get("name", path.stem)}
     base = Scene.from_dict(data, base_dir=path.parent)
-    if base.mesh.file is not None or base.mesh.generate is None:
-        raise TensormassError(f"{path}: the accuracy sweep scales mesh.cells, so the scene needs a generated mesh "
-                              "([mesh] generate = \"bar\"), not a mesh file")
     if not base.probes:
         raise TensormassError(f"{path}: the accuracy sweep compares the first probe's displacement; add a [[probe]]")
     settings = settings or {}
@@ -192,7 +196,12 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
         raise TensormassError(f"--levels must be a positive integer, got {levels!r}")
     factors = (sweep or {}).get("factors") or [2 ** i for i in range(levels if levels else (2 if quick else 3))]
     probe = base.probes[0].name
-    elements = list(dict.fromkeys(settings.get("elements") or [None]))
+    files = None                          # a mesh file: levels by uniform refinement (file_levels.py)
+    if base.mesh.file is not None:
+        files = FileLevels(base, path, settings.get("elements"), levels, default_levels=len(factors))
+        factors = [2 ** i for i in range(files.n_levels)]
+        progress(f"accuracy: {files.note}")
+    elements = files.elements if files is not None else list(dict.fromkeys(settings.get("elements") or [None]))
     laws_ = list(dict.fromkeys(settings.get("laws") or [None]))
     quads = list(dict.fromkeys(settings.get("quadratures") or [None]))
     combos = [(e, l, q) for e in elements for l in laws_ for q in quads]
@@ -201,17 +210,19 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
              f"probe {probe!r}")
     rows, vectors, compile_s, notes, finest = [], [], {}, [], []
     for e, l, q in combos:
-        d0 = _settings(data, e, l, q)
+        d0 = _settings(data, e if files is None else None, l, q)
         try:
-            scene0 = Scene.from_dict(d0, base_dir=path.parent)
+            scene0 = Scene.from_dict(d0, base_dir=path.parent) if files is None else \
+                files.scene(d0, e, 0, path.parent)
         except SceneError as exc:
-            own = (base.mesh.element, "+".join(dict.fromkeys(m.law for m in base.materials)),
+            own = (base.mesh.element if files is None else "+".join(files.solid_types(files.mesh0)),
+                   "+".join(dict.fromkeys(m.law for m in base.materials)),
                    "+".join(dict.fromkeys(m.quadrature for m in base.materials)))
             label = " / ".join(x if x is not None else o for x, o in zip((e, l, q), own))
             notes.append(f"- skipped {label}: {exc}")
             progress(f"  skipped {label}: {exc}")
             continue
-        element = scene0.mesh.element
+        element = scene0.mesh.element if files is None else "+".join(files.solid_types(files.mesh(e, 0)))
         law = "+".join(dict.fromkeys(m.law for m in scene0.materials))
         quad = "+".join(dict.fromkeys(m.quadrature for m in scene0.materials))
         analytic = _scene_analytic(scene0)
@@ -220,11 +231,16 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
             t0 = time.perf_counter()
             _measure(scene0, trace=False)                              # warm-up: compile / load kernels
             compile_s[(element, law, quad)] = time.perf_counter() - t0
-            for k in factors:
-                d = copy.deepcopy(d0)
-                cells = [int(c) * int(k) for c in base.mesh.cells]
-                d["mesh"]["cells"] = cells
-                summary, peak = _measure(Scene.from_dict(d, base_dir=path.parent))
+            for level, k in enumerate(factors):
+                if files is None:
+                    d = copy.deepcopy(d0)
+                    cells = [int(c) * int(k) for c in base.mesh.cells]
+                    d["mesh"]["cells"] = cells
+                    scene_k = Scene.from_dict(d, base_dir=path.parent)
+                else:
+                    scene_k = files.scene(d0, e, level, path.parent)
+                    cells = [scene_k.load_mesh().n_cells]                 # the cells column: the count
+                summary, peak = _measure(scene_k)
                 u = [float(x) for x in summary.probes[probe]]
                 vectors.append(u)
                 rows.append(result_row(element, law, quad, cells, summary, peak, math.sqrt(sum(x * x for x in u))))
@@ -265,7 +281,7 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
                      "under gravity along -z probed at x = L"
                      if any(math.isfinite(r["error_analytic"]) for r in rows)
                      else "none (not a 3D bar under gravity along -z probed at x = L)"),
-        "subject": f"scene {path}; value is |u| of probe {probe!r}",
+        "subject": f"scene {path}; value is |u| of probe {probe!r}" + (f"; {files.note}" if files is not None else ""),
     }
     for r in rows:
         r["benchmark"] = "scene"
@@ -276,6 +292,8 @@ def _user_scene(scene_path, quick, progress, sweep, settings=None) -> tuple:
 
 def _scene_analytic(scene):
     """Beam-theory tip deflection when the scene is a 3D gravity-loaded bar probed at its end, else None."""
+    if scene.mesh.file is not None:
+        return None
     try:
         if len(scene.mesh.size) != 3 or len(scene.materials) != 1 or scene.loads.nodal:
             return None
@@ -543,17 +561,21 @@ def add_accuracy_command(subparsers) -> None:
     p = subparsers.add_parser("accuracy", help="sweep element x law x quadrature x resolution: error against "
                                                "run time (results.csv, plots, report.md)")
     p.add_argument("scene", nargs="?", default=None,
-                   help="scene file (.toml, generated mesh) to refine; default: the built-in cantilever benchmark")
+                   help="scene file (.toml) to refine: a generated bar (mesh.cells scaled) or a mesh file (triangle/"
+                        "tetra meshes refined uniformly and raised to quadratic); default: the built-in cantilever "
+                        "benchmark")
     p.add_argument("--benchmark", nargs="+", metavar="NAME", choices=BENCHMARK_NAMES + ("all",), default=None,
                    help="built-in benchmarks to run: " + ", ".join(BENCHMARK_NAMES) + " or all (default: cantilever)")
     p.add_argument("--elements", nargs="+", metavar="ELEMENT", default=None,
-                   help="SCENE sweep: mesh elements to try (default: the scene's own)")
+                   help="SCENE sweep: mesh elements to try (default: the scene's own; a tetra / triangle mesh file: "
+                        "it and tetra10 / triangle6)")
     p.add_argument("--laws", nargs="+", metavar="LAW", default=None,
                    help="SCENE sweep: material laws to try, applied to every material (default: the scene's own)")
     p.add_argument("--quadratures", nargs="+", metavar="QUAD", default=None,
                    help="SCENE sweep: quadratures to try, applied to every material (default: the scene's own)")
     p.add_argument("--levels", type=int, metavar="N", default=None,
-                   help="SCENE sweep: resolution levels, cells x 1, 2, 4, ... (default 3, 2 with --quick)")
+                   help="SCENE sweep: resolution levels, cells x 1, 2, 4, ... or a mesh file refined 0, 1, 2, ... "
+                        "times (default 3, 2 with --quick)")
     p.add_argument("--quick", action="store_true", help="a small sweep (well under 2 minutes)")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(run=cmd_accuracy)

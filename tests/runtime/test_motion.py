@@ -398,7 +398,7 @@ def test_the_tool_press_example_follows_its_path():
     scene.solver.dt, scene.solver.steps = 0.05, 36          # the same 1.8 s path in fewer steps
     sim = Simulation(scene)
     tool = []
-    sim.progress = lambda k, n: tool.append((sim.ctx.t, sim.displacement[sim.model.probes["tool_centre"]]))
+    sim.progress = lambda k, n: tool.append((sim.ctx.t, sim.model.probes["tool_centre"].value(sim.displacement)))
     summary = sim.run()
     assert summary.status in ("ok", "warnings")
     path = {round(t, 6): u for t, u in tool}

@@ -99,13 +99,18 @@ def test_probe_far_outside_the_body_is_refused():
     with pytest.raises(SceneError) as info:
         scene(probe=[{"name": "tip", "point": [101.0, 0.1, 0.1]}])
     message = str(info.value)
-    assert message.startswith("probe[0].point: probe 'tip' at [101.0, 0.1, 0.1] is 100 m from the nearest mesh node")
-    assert "10% of the body's size" in message
+    assert message.startswith("probe[0].point: probe 'tip' at [101, 0.1, 0.1] is not on the body: it is 100 m "
+                              "outside it (from the nearest boundary face; nearest node")
+    assert "within 10% of the nearest cell's size" in message
 
 
-def test_probes_on_or_near_the_body_are_accepted():
-    ok = scene(probe=[{"name": "tip", "point": [1.0, 0.1, 0.1]}, {"name": "near", "point": [1.05, 0.1, 0.1]}])
+def test_probes_on_or_near_the_body_are_accepted_and_beyond_the_tolerance_refused():
+    # cells 0.25 x 0.2 x 0.2 m: the tolerance is 10 % of their diagonal, 0.0377 m
+    ok = scene(probe=[{"name": "tip", "point": [1.0, 0.1, 0.1]}, {"name": "near", "point": [1.03, 0.1, 0.1]}])
     assert [p.name for p in ok.probes] == ["tip", "near"]
+    with pytest.raises(SceneError, match=r"^probe\[1\]\.point: probe 'off' at \[1\.05, 0\.1, 0\.1\] is not on the "
+                                         r"body: it is 0\.05 m outside"):
+        scene(probe=[{"name": "tip", "point": [1.0, 0.1, 0.1]}, {"name": "off", "point": [1.05, 0.1, 0.1]}])
     # the centre of a single big cell is far from every node, but on the body
     one = scene(mesh={"generate": "bar", "size": [1.0, 1.0, 1.0], "cells": [1, 1, 1]},
                 probe=[{"name": "centre", "point": [0.5, 0.5, 0.5]}])
