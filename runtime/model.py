@@ -24,7 +24,7 @@ from .integrators import outputs_for
 from .mesh import Mesh, boundary_faces, check_mesh
 from .mesh import face_measure as _face_measure  # face types: the element table
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
-                      prescribed_values, reachable_laws, switch_parameters)
+                      prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from .scene import Loads, Output, Solver
 from .scene_mesh import build_mesh, scene_mesh
 
@@ -153,7 +153,7 @@ class Model:
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
         self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
         self.f_ext = self._external_forces()
-        self.probes = {p.name: self._nearest_node(p.point) for p in probes}
+        self.probes = {p.name: self._probe_nodes(p, i) for i, p in enumerate(probes)}
         self.scene = None
         self.build_time = time.perf_counter() - start
 
@@ -274,14 +274,17 @@ class Model:
     def _constraints(self, fixed) -> tuple:
         """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
         for i, fx in enumerate(fixed):
-            self._nodes_in(fx.box, f"fixed[{i}]")
+            if getattr(fx, "region", None) is not None:     # a mesh group: runtime.regions
+                selection_nodes(self.mesh, fx, f"fixed[{i}]", self.box_tol)
+            else:
+                self._nodes_in(fx.box, f"fixed[{i}]")
             comps = np.arange(self.dim) if fx.components is None else np.asarray(fx.components, dtype=int)
             if comps.size == 0 or comps.min() < 0 or comps.max() >= self.dim:
                 raise TensormassError(f"fixed[{i}].components must be in 0..{self.dim - 1}, got {fx.components!r}")
             if fx.displacement is not None:
                 self._vector(fx.displacement, f"fixed[{i}].displacement")
         # entries that give one dof different values are refused there (the order would decide)
-        target = prescribed_values(fixed, self.mesh.points, self.box_tol)[0].ravel()
+        target = prescribed_values(fixed, self.mesh.points, self.box_tol, self.mesh)[0].ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
         used = np.zeros(self.n_points, bool)
@@ -296,6 +299,9 @@ class Model:
         f = (self.mass.reshape(-1, self.dim) * self._vector(self.loads.gravity, "loads.gravity")).ravel()
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
+            if getattr(load, "region", None) is not None:   # a mesh group (and box): runtime.regions
+                self._add_region_load(f.reshape(-1, self.dim), load, force, i)
+                continue
             if load.kind == "force":
                 nodes = self._nodes_in(load.box, f"loads.nodal[{i}]")
                 f.reshape(-1, self.dim)[nodes] += force / nodes.size
@@ -317,6 +323,28 @@ class Model:
             hit = True
         if not hit:
             raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
+
+    def _add_region_load(self, f, load, value, i):
+        """A force (split evenly over the region's nodes) or a traction (per unit area of its boundary
+        faces, area-split equally over each face's nodes, as for boxes) on a mesh region (and box)."""
+        key = f"loads.nodal[{i}]"
+        if load.kind == "force":
+            nodes = selection_nodes(self.mesh, load, key, self.box_tol)
+            f[nodes] += value / nodes.size
+            return
+        faces = region_faces(self.mesh, load.region, load.box, key=f"{key}.region", tol=self.box_tol,
+                             what="a traction")
+        if not faces:
+            raise TensormassError(f"{key} (traction): region {load.region!r} has no boundary face")
+        for rows in faces.values():
+            for nodes in rows:
+                f[nodes] += value * _face_measure(self.mesh.points, nodes, self.dim) / nodes.size
+
+    def _probe_nodes(self, probe, i: int):
+        """A probe's node (the nearest to its point), or the nodes of its region/box (mean displacement)."""
+        if getattr(probe, "point", None) is not None:
+            return self._nearest_node(probe.point)
+        return selection_nodes(self.mesh, probe, f"probe[{i}]", self.box_tol)
 
     def _nearest_node(self, point) -> int:
         p = self._vector(point, "probe point")
@@ -363,4 +391,5 @@ class Model:
 
     def probe_values(self, u: np.ndarray) -> dict:
         U = u.reshape(self.n_points, self.dim)
-        return {name: U[node].tolist() for name, node in self.probes.items()}
+        return {name: (U[node].mean(axis=0) if np.ndim(node) else U[node]).tolist()
+                for name, node in self.probes.items()}
