@@ -914,7 +914,7 @@ def orient_cells(mesh: Mesh) -> Mesh:
         flip = np.all(_sample_dets(mesh.points, blk) < 0, axis=1)
         cells[flip] = cells[flip][:, list(_types.get(blk.type).flip)]
         blocks.append(CellBlock(blk.type, cells, None if blk.tags is None else blk.tags.copy()))
-    return Mesh(mesh.points.copy(), blocks)
+    return Mesh(mesh.points.copy(), blocks, list(mesh.groups))    # same nodes and cell ids: same groups
 
 
 # --------------------------------------------------------------------------- bar generators

@@ -32,7 +32,7 @@ import numpy as np
 from .. import elements as _types
 from .errors import TensormassError
 
-__all__ = ["Group", "read_groups", "check_groups_on_surface", "group_label", "FACE_CORNERS", "cell_dim"]
+__all__ = ["Group", "read_groups", "check_groups_on_surface", "carry_groups", "group_label", "FACE_CORNERS", "cell_dim"]
 
 # Lower-dimensional cell types a group may hold, with their corner counts (meshio names).
 FACE_CORNERS = {"vertex": 1, "line": 2, "line3": 2, "triangle": 3, "triangle6": 3, "quad": 4, "quad8": 4,
@@ -240,3 +240,82 @@ def check_groups_on_surface(mesh, ft, boundary_rows, error=TensormassError) -> N
                             f"body's surface (each must be {what}; e.g. the cell with nodes [{first}]): a "
                             "boundary group must lie on the boundary of the volume cells (an interface "
                             "inside the body, or cells that do not share the volume's nodes)")
+
+
+# ------------------------------------------------------------------------------ through refinement
+
+
+def carry_groups(old, new, parents, cell_parent) -> list:
+    """The groups of `old` on its refinement `new` (runtime.refine: new point n_old + i is the
+    midpoint of parents[i]; new cell c descends from old cell cell_parent[c]).
+
+    Volume groups keep the descendants of their cells.  A new point lies on an old face (edge)
+    exactly when all the old points it descends from (its support, through the midpoints) are
+    corners of that face: a refined boundary face belongs to a surface group when its corners'
+    support is one of the group's old faces; a curve's segment is cut at the midpoints whose
+    support is its two ends; points stay.
+    """
+    groups = list(getattr(old, "groups", ()))
+    if not groups:
+        return []
+    n_old = old.n_points
+    supp = [frozenset((v,)) for v in range(n_old)]
+    for a, b in np.asarray(parents, dtype=np.int64).tolist():
+        supp.append(supp[a] | supp[b])
+    cell_parent = np.asarray(cell_parent, dtype=np.int64)
+    faces = None
+    out = []
+    for g in groups:
+        cells = {}
+        for ctype, rows in g.cells.items():
+            d = _FACE_DIM[ctype]
+            k = FACE_CORNERS[ctype]
+            if d == new.dim - 1 and d > 0:
+                if faces is None:
+                    faces = _new_boundary(new, supp)
+                want = {tuple(sorted(int(v) for v in r[:k])) for r in rows}
+                for ftype, nodes, key in faces:
+                    if key in want:
+                        cells.setdefault(ftype, []).append(nodes)
+            elif d == 1:
+                cells.setdefault("line", []).extend(_split_segments(new, supp, rows, n_old))
+            else:
+                cells.setdefault(ctype, []).extend(np.asarray(rows).tolist())
+        cells = {t: np.asarray(v, dtype=np.int64) for t, v in cells.items() if len(v)}
+        ids = np.flatnonzero(np.isin(cell_parent, g.cell_ids)) if g.cell_ids.size else np.zeros(0, np.int64)
+        out.append(Group(g.name, g.id, g.dim, ids.astype(np.int64), cells))
+    return out
+
+
+def _new_boundary(mesh, supp) -> list:
+    """(face type, nodes, sorted support of its corners) of every boundary face of a refined mesh."""
+    from .mesh import _boundary_rows, _face_table      # runtime.mesh imports this module
+    ft = _face_table(mesh)
+    out = []
+    for r in _boundary_rows(ft):
+        blk = mesh.blocks[ft.block[r]]
+        face = _types.get(blk.type).faces[ft.lface[r]]
+        nodes = blk.cells[ft.local[r], list(face.nodes)]
+        support = frozenset().union(*(supp[int(v)] for v in nodes[:len(face.corners)]))
+        out.append((face.type, nodes.tolist(), tuple(sorted(support))))
+    return out
+
+
+def _split_segments(mesh, supp, rows, n_old) -> list:
+    """Curve cells (a, b) cut at the new points on them (support {a, b}), in order along the segment."""
+    on: dict = {}
+    for v in range(n_old, len(supp)):
+        if len(supp[v]) == 2:
+            on.setdefault(supp[v], []).append(v)
+    out = []
+    for r in np.asarray(rows).tolist():
+        a, b = int(r[0]), int(r[1])
+        inner = on.get(frozenset((a, b)), [])
+        if not inner:
+            out.append([a, b])
+            continue
+        d = mesh.points[b] - mesh.points[a]
+        t = [(float(np.dot(mesh.points[v] - mesh.points[a], d)), v) for v in inner]
+        chain = [a] + [v for _, v in sorted(t)] + [b]
+        out.extend([p, q] for p, q in zip(chain[:-1], chain[1:]))
+    return out

@@ -261,3 +261,43 @@ def test_cell_sets_and_unnamed_tags():
     assert got[("hard", 3, 3)].cell_ids.size == len(cells)
     assert got[(None, 7, 2)].cells["triangle"].tolist() == tip.tolist()
     assert Group(None, 7, 2).label == "id 7 (surface)"
+
+
+@pytest.mark.parametrize("share", [1.0, 0.4])
+def test_groups_follow_refinement(bar, share):
+    from tensormass.runtime.refine import refine
+    rng = np.random.default_rng(3)
+    marked = rng.random(bar.n_cells) < share
+    mesh = bar
+    for _ in range(2):
+        mesh = refine(mesh, np.flatnonzero(marked[:mesh.n_cells]) if share < 1 else np.ones(mesh.n_cells, bool),
+                      propagate=True).mesh
+    check_mesh(mesh)                                          # the refined groups lie on the surface
+    assert mesh.n_cells > bar.n_cells
+    groups = {g.name: g for g in mesh.groups}
+    x = mesh.points
+    for name, plane in (("clamp", 0.0), ("tip", L)):
+        nodes = region_nodes(mesh, name)
+        assert nodes.tolist() == np.flatnonzero(x[:, 0] == plane).tolist()
+        (rows,) = region_faces(mesh, name).values()
+        tri = x[rows]
+        assert 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum() == \
+            pytest.approx(W * W)
+    edge = region_nodes(mesh, "edge")
+    assert edge.tolist() == np.flatnonzero((x[:, 0] == L) & (x[:, 2] == 0.0)).tolist()
+    assert len(groups["edge"].cells["line"]) == edge.size - 1
+    centre_x = np.vstack([x[b.cells].mean(axis=1) for b in mesh.blocks])[:, 0]
+    assert groups["left"].cell_ids.tolist() == np.flatnonzero(centre_x < 0.5).tolist()
+    assert groups["corner"].cells["vertex"].tolist() == [[_node(x, (L, W, W))]]
+
+
+def test_groups_follow_refinement_in_2d():
+    from tensormass.runtime.refine import refine
+    from pathlib import Path
+    mesh = read_mesh(Path(__file__).parent / "data" / "msh" / "triangle_v41.msh")
+    fine = refine(mesh, np.ones(mesh.n_cells, bool)).mesh
+    check_mesh(fine)
+    side = region_nodes(fine, "side")
+    assert side.tolist() == np.flatnonzero(fine.points[:, 0] == 0.0).tolist() and side.size > region_nodes(mesh, "side").size
+    (edges,) = region_faces(fine, "side").values()
+    assert np.abs(fine.points[edges[:, 1], 1] - fine.points[edges[:, 0], 1]).sum() == pytest.approx(0.6)
