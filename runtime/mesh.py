@@ -224,6 +224,8 @@ def read_mesh(path) -> Mesh:
     points = _points_for_dim(np.asarray(m.points, dtype=np.float64), dim, path)
     tag_key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
     gmsh = _is_gmsh(path)
+    # MSH 2 writes a cell once per physical group it is in: those copies are one cell in several groups
+    repeat = _msh2_repeats(m, dims, dim, tag_key) if gmsh and tag_key is not None else {}
     groups: dict = {}
     all_tags, where, lower = [], [], []       # per meshio block: tags, (group key, rows), kept boundary cells
     for i, cb in enumerate(m.cells):
@@ -238,7 +240,8 @@ def read_mesh(path) -> Mesh:
             continue
         lower.append(None)
         mine = []
-        for key, rows in _split_rows_by_tag(cb.type, len(data), tags):
+        keep = np.flatnonzero(repeat[i] < 0) if i in repeat else None
+        for key, rows in _split_rows_by_tag(cb.type, len(data), tags, keep):
             groups.setdefault(key, []).append(data[rows])
             mine.append((key, rows, sum(len(c) for c in groups[key]) - len(rows)))
         where.append(mine)
@@ -258,6 +261,10 @@ def read_mesh(path) -> Mesh:
         for key, rows, start in mine:
             ids[rows] = offset[key] + start + np.arange(len(rows))
         solid_ids.append(ids)
+    for i, rep in repeat.items():             # a copy gets the id of the cell it repeats (blocks come in order)
+        copies = np.flatnonzero(rep >= 0)
+        block, row = np.divmod(rep[copies], 1 << 32)
+        solid_ids[i][copies] = [solid_ids[int(b)][int(r)] for b, r in zip(block, row)]
     for i, cells in enumerate(lower):
         if cells is not None and cells.size and (cells.min() < 0 or cells.max() >= len(points)):
             raise MeshError(f"{path}: {m.cells[i].type} cells (block {i} of the file) refer to nodes outside "
@@ -265,14 +272,43 @@ def read_mesh(path) -> Mesh:
     return Mesh(points, blocks, read_groups(m, all_tags, solid_ids, lower))
 
 
-def _split_rows_by_tag(cell_type, n, tags):
-    """Yield ((type, tag), row ids) per distinct tag, tags in order of first appearance."""
+def _split_rows_by_tag(cell_type, n, tags, keep=None):
+    """Yield ((type, tag), row ids) per distinct tag, tags in order of first appearance (rows in keep only)."""
+    rows = np.arange(n) if keep is None else keep
     if tags is None:
-        yield (cell_type, None), np.arange(n)
+        yield (cell_type, None), rows
         return
+    tags = tags[rows]
     uniq, first = np.unique(tags, return_index=True)
     for t in uniq[np.argsort(first)]:
-        yield (cell_type, int(t)), np.flatnonzero(tags == t)
+        yield (cell_type, int(t)), rows[tags == t]
+
+
+def _msh2_repeats(m, dims, dim, tag_key) -> dict:
+    """{meshio block: per cell, -1, or (block << 32) + row of the earlier cell with the same nodes and
+    another tag}: MSH 2 lists a cell in several physical groups once per group."""
+    by_type: dict = {}
+    for i, cb in enumerate(m.cells):
+        if dims[cb.type] == dim and len(cb.data):
+            by_type.setdefault(cb.type, []).append(i)
+    out = {}
+    for blocks in by_type.values():
+        data = np.concatenate([np.asarray(m.cells[i].data, np.int64) for i in blocks])
+        tags = np.concatenate([np.asarray(m.cell_data[tag_key][i]).reshape(-1) for i in blocks])
+        src = np.concatenate([(np.int64(i) << 32) + np.arange(len(m.cells[i].data)) for i in blocks])
+        _, first, inverse = np.unique(data, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        orig = first[inverse]
+        copy = (orig != np.arange(len(data))) & (tags != tags[orig])
+        if not copy.any():
+            continue
+        rep = np.where(copy, src[orig], -1)
+        start = 0
+        for i in blocks:
+            n = len(m.cells[i].data)
+            out[i] = rep[start:start + n]
+            start += n
+    return out
 
 
 def _is_gmsh(path) -> bool:

@@ -301,3 +301,30 @@ def test_groups_follow_refinement_in_2d():
     assert side.tolist() == np.flatnonzero(fine.points[:, 0] == 0.0).tolist() and side.size > region_nodes(mesh, "side").size
     (edges,) = region_faces(fine, "side").values()
     assert np.abs(fine.points[edges[:, 1], 1] - fine.points[edges[:, 0], 1]).sum() == pytest.approx(0.6)
+
+
+def test_msh2_cells_listed_once_per_group_are_one_cell(tmp_path):
+    """MSH 2 writes a cell that is in two physical groups twice (one physical tag per line)."""
+    m = generate_bar((L, W, W), (2, 1, 1), "tetra")
+    cells = m.blocks[0].cells
+    for tags, ok in (((1, 2), True), ((1, 1), False)):
+        mm = meshio.Mesh(m.points, [("tetra", cells), ("tetra", cells)],
+                         cell_data={"gmsh:physical": [np.full(len(cells), t) for t in tags],
+                                    "gmsh:geometrical": [np.full(len(cells), 1)] * 2},
+                         field_data={"body": np.array([1, 3]), "soft": np.array([2, 3])})
+        path = tmp_path / f"twice{tags[1]}.msh"
+        with contextlib.redirect_stdout(io.StringIO()):
+            mm.write(path, file_format="gmsh22", binary=False)
+        mesh = read_mesh(path)
+        if not ok:                                # the same cell twice in one group: overlapping cells
+            with pytest.raises(MeshError, match="overlapping"):
+                check_mesh(mesh)
+            continue
+        check_mesh(mesh)
+        assert [(b.type, len(b)) for b in mesh.blocks] == [("tetra", len(cells))]
+        groups = {g.name: g for g in mesh.groups}
+        assert groups["body"].cell_ids.tolist() == groups["soft"].cell_ids.tolist() == list(range(len(cells)))
+        which = assign_materials(mesh, [Material(region="soft"), Material(region="body")])
+        assert np.concatenate(which).tolist() == [0] * len(cells)
+        which = assign_materials(mesh, [Material(region=2), Material(region="body")])
+        assert np.concatenate(which).tolist() == [0] * len(cells)
