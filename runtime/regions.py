@@ -147,16 +147,35 @@ def region_cell_masks(mesh, region, key: str = "region") -> list:
 
 
 def _boundary(mesh):
-    """Boundary faces of the volume cells: (face type per row, full node rows, corner keys, cell ids)."""
+    """Boundary faces of the volume cells: (face type per row, full node rows, corner keys, cell ids).
+
+    Kept on the mesh while its points and cell arrays are the same objects (a scene selects
+    several regions on one mesh: the face table is built once)."""
+    key = (id(mesh.points), mesh.points.shape) + tuple((id(b.cells), b.cells.shape) for b in mesh.blocks)
+    cached = getattr(mesh, "_boundary_cache", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    value = _boundary_faces_of(mesh)
+    try:
+        mesh._boundary_cache = (key, value)
+    except AttributeError:                  # a mesh-like object without attributes: no cache
+        pass
+    return value
+
+
+def _boundary_faces_of(mesh):
     ft = _face_table(mesh)
     rows = _boundary_rows(ft)
-    types, nodes, keys = [], [], []
-    for r in rows:
-        blk = mesh.blocks[ft.block[r]]
-        face = _types.get(blk.type).faces[ft.lface[r]]
-        types.append(face.type)
-        nodes.append(blk.cells[ft.local[r], list(face.nodes)])
-        keys.append(tuple(sorted(int(v) for v in ft.nodes[r] if v >= 0)))
+    types, nodes, keys = [None] * rows.size, [None] * rows.size, [None] * rows.size
+    pair = ft.block[rows] * 64 + ft.lface[rows]             # (block, face of the cell): one gather each
+    for p in np.unique(pair):
+        at = np.flatnonzero(pair == p)
+        blk = mesh.blocks[int(p) // 64]
+        face = _types.get(blk.type).faces[int(p) % 64]
+        full = blk.cells[ft.local[rows[at]]][:, list(face.nodes)]
+        corner = np.sort(full[:, :len(face.corners)], axis=1).tolist()
+        for j, i in enumerate(at.tolist()):
+            types[i], nodes[i], keys[i] = face.type, full[j], tuple(corner[j])
     return types, nodes, keys, ft.cell[rows]
 
 
