@@ -328,3 +328,21 @@ def test_msh2_cells_listed_once_per_group_are_one_cell(tmp_path):
         assert np.concatenate(which).tolist() == [0] * len(cells)
         which = assign_materials(mesh, [Material(region=2), Material(region="body")])
         assert np.concatenate(which).tolist() == [0] * len(cells)
+
+
+def test_2d_curve_groups_carry_tractions():
+    from pathlib import Path
+    data = Path(__file__).parent / "data" / "msh"
+    for name, ftype in (("triangle6_v41.msh", "line3"), ("quad_v22b.msh", "line"), ("triangle_v41.msh", "line")):
+        mesh = read_mesh(data / name)
+        faces = region_faces(mesh, "side")
+        assert list(faces) == [ftype]
+        x = mesh.points[faces[ftype]]
+        assert np.all(x[:, :, 0] == 0.0) and np.all(x[:, 1, 1] < x[:, 0, 1])   # x = 0, body on the left: downwards
+        model = Model(mesh, [Material(law="hooke", E=1e6, nu=0.3)],
+                      fixed=[Fixed(box=((1.0, -1.0), (1.0, 1.0)))],
+                      loads=Loads(gravity=(0.0, 0.0), nodal=[NodalLoad(box=None, force=(-3.0, 2.0), kind="traction",
+                                                                      region="side")]))
+        f = model.f_ext.reshape(-1, 2)
+        assert f.sum(axis=0) == pytest.approx([-3.0 * 0.6, 2.0 * 0.6])
+        assert np.allclose(np.delete(f, region_nodes(mesh, "side"), axis=0), 0.0)
