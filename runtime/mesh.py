@@ -33,6 +33,7 @@ import numpy as np
 from .. import elements as _types
 from ..elements import BOX, PRISM, PYRAMID, SIMPLEX, ElementType, monomial_exponents
 from .errors import TensormassError
+from .mesh_groups import FACE_CORNERS, check_groups_on_surface, read_groups
 
 __all__ = [
     "MeshError", "Mesh", "CellBlock", "NODES_PER_CELL", "SOLID_TYPES_3D", "SOLID_TYPES_2D",
@@ -47,6 +48,13 @@ SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2)
 # What generate_bar builds, by space dimension (a capability of the bar generator, not of the table).
 BAR_ELEMENTS = {3: ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed"),
                 2: ("triangle", "triangle6", "quad", "mixed")}
+
+# gmsh node order -> VTK node order where meshio keeps gmsh's (meshio converts tetra10, wedge15,
+# hexahedron20/27 and pyramid13 itself): gmsh's prism has its base triangle (0, 1, 2) wound the
+# other way round (counterclockwise seen from the top face), VTK's wedge clockwise.  The other
+# types tensormass supports (tetra, tetra10, hexahedron, pyramid, triangle, triangle6, quad) are
+# read from gmsh files with positive volume as they are (tests/runtime/test_msh_node_order.py).
+GMSH_TO_VTK = {"wedge": [0, 2, 1, 3, 5, 4]}
 
 # Cell data names that carry integer region tags, most specific first.
 _TAG_KEYS = ("gmsh:physical", "cell_tags", "medit:ref")
@@ -114,6 +122,7 @@ class Mesh:
     """Points (n_points, dim) and cell blocks; dim is 2 or 3."""
     points: np.ndarray
     blocks: list[CellBlock] = field(default_factory=list)
+    groups: list = field(default_factory=list)          # runtime.mesh_groups.Group: named regions of the file
 
     def __post_init__(self):
         pts = np.asarray(self.points, dtype=np.float64)
@@ -121,6 +130,7 @@ class Mesh:
             raise MeshError(f"points must have shape (n, 2) or (n, 3), got {pts.shape}")
         self.points = np.ascontiguousarray(pts)
         self.blocks = list(self.blocks)
+        self.groups = list(self.groups)
 
     @property
     def dim(self) -> int:
@@ -168,24 +178,18 @@ def _int_tags(values, name: str) -> np.ndarray:
     return tags.astype(np.int64)
 
 
-def _split_by_tag(cell_type, data, tags):
-    """Yield ((type, tag), cells) per distinct tag, tags in order of first appearance."""
-    if tags is None:
-        yield (cell_type, None), data
-        return
-    uniq, first = np.unique(tags, return_index=True)
-    for t in uniq[np.argsort(first)]:
-        yield (cell_type, int(t)), data[tags == t]
-
-
 def read_mesh(path) -> Mesh:
-    """Read a mesh with meshio and keep the solid cells of its dimension.
+    """Read a mesh with meshio: the solid cells of its dimension, and its groups.
 
-    Lower-dimensional cells (boundary triangles/lines/vertices) are dropped.
     Tags come from cell data 'gmsh:physical', 'cell_tags' or 'medit:ref'; the
     blocks are one per (type, tag), in order of first appearance, with the
     file's cell order kept within each block.  A 2D mesh stored with z == 0 is
-    returned with 2 coordinates.
+    returned with 2 coordinates.  Physical groups, cell sets and tags of every
+    dimension become Mesh.groups (runtime.mesh_groups): lower-dimensional cells
+    (boundary triangles/quads/lines/vertices) are kept there, in the groups they
+    belong to; those in no group are dropped.  gmsh files (first line
+    $MeshFormat) get their node order converted to VTK's where it differs
+    (GMSH_TO_VTK: the prism; meshio converts the quadratic types itself).
     """
     import meshio
 
@@ -219,21 +223,101 @@ def read_mesh(path) -> Mesh:
 
     points = _points_for_dim(np.asarray(m.points, dtype=np.float64), dim, path)
     tag_key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
+    gmsh = _is_gmsh(path)
+    # MSH 2 writes a cell once per physical group it is in: those copies are one cell in several groups
+    repeat = _msh2_repeats(m, dims, dim, tag_key) if gmsh and tag_key is not None else {}
     groups: dict = {}
+    all_tags, where, lower = [], [], []       # per meshio block: tags, (group key, rows), kept boundary cells
     for i, cb in enumerate(m.cells):
-        if dims[cb.type] != dim:
-            continue
-        data = np.asarray(cb.data, dtype=np.int64)
         tags = None if tag_key is None else _int_tags(m.cell_data[tag_key][i], tag_key)
-        for key, cells in _split_by_tag(cb.type, data, tags):
-            groups.setdefault(key, []).append(cells)
-    blocks = []
+        all_tags.append(tags)
+        data = np.asarray(cb.data, dtype=np.int64)
+        if gmsh and cb.type in GMSH_TO_VTK:
+            data = data[:, GMSH_TO_VTK[cb.type]]
+        if dims[cb.type] != dim:
+            where.append(None)
+            lower.append(data if cb.type in FACE_CORNERS else None)
+            continue
+        lower.append(None)
+        mine = []
+        keep = np.flatnonzero(repeat[i] < 0) if i in repeat else None
+        for key, rows in _split_rows_by_tag(cb.type, len(data), tags, keep):
+            groups.setdefault(key, []).append(data[rows])
+            mine.append((key, rows, sum(len(c) for c in groups[key]) - len(rows)))
+        where.append(mine)
+    blocks, offset = [], {}
     for (ctype, tag), parts in groups.items():
         cells = np.concatenate(parts)
+        offset[(ctype, tag)] = sum(len(b) for b in blocks)
         tags = None if tag is None else np.full(len(cells), tag, dtype=np.int64)
         blocks.append(CellBlock(ctype, cells, tags))
     _check_node_ids(blocks, len(points), path)
-    return Mesh(points, blocks)
+    solid_ids = []                            # global id of every cell of each solid meshio block
+    for i, mine in enumerate(where):
+        if mine is None:
+            solid_ids.append(None)
+            continue
+        ids = np.empty(len(m.cells[i].data), np.int64)
+        for key, rows, start in mine:
+            ids[rows] = offset[key] + start + np.arange(len(rows))
+        solid_ids.append(ids)
+    for i, rep in repeat.items():             # a copy gets the id of the cell it repeats (blocks come in order)
+        copies = np.flatnonzero(rep >= 0)
+        block, row = np.divmod(rep[copies], 1 << 32)
+        solid_ids[i][copies] = [solid_ids[int(b)][int(r)] for b, r in zip(block, row)]
+    for i, cells in enumerate(lower):
+        if cells is not None and cells.size and (cells.min() < 0 or cells.max() >= len(points)):
+            raise MeshError(f"{path}: {m.cells[i].type} cells (block {i} of the file) refer to nodes outside "
+                            f"0..{len(points) - 1}")
+    return Mesh(points, blocks, read_groups(m, all_tags, solid_ids, lower))
+
+
+def _split_rows_by_tag(cell_type, n, tags, keep=None):
+    """Yield ((type, tag), row ids) per distinct tag, tags in order of first appearance (rows in keep only)."""
+    rows = np.arange(n) if keep is None else keep
+    if tags is None:
+        yield (cell_type, None), rows
+        return
+    tags = tags[rows]
+    uniq, first = np.unique(tags, return_index=True)
+    for t in uniq[np.argsort(first)]:
+        yield (cell_type, int(t)), rows[tags == t]
+
+
+def _msh2_repeats(m, dims, dim, tag_key) -> dict:
+    """{meshio block: per cell, -1, or (block << 32) + row of the earlier cell with the same nodes and
+    another tag}: MSH 2 lists a cell in several physical groups once per group."""
+    by_type: dict = {}
+    for i, cb in enumerate(m.cells):
+        if dims[cb.type] == dim and len(cb.data):
+            by_type.setdefault(cb.type, []).append(i)
+    out = {}
+    for blocks in by_type.values():
+        data = np.concatenate([np.asarray(m.cells[i].data, np.int64) for i in blocks])
+        tags = np.concatenate([np.asarray(m.cell_data[tag_key][i]).reshape(-1) for i in blocks])
+        src = np.concatenate([(np.int64(i) << 32) + np.arange(len(m.cells[i].data)) for i in blocks])
+        _, first, inverse = np.unique(data, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        orig = first[inverse]
+        copy = (orig != np.arange(len(data))) & (tags != tags[orig])
+        if not copy.any():
+            continue
+        rep = np.where(copy, src[orig], -1)
+        start = 0
+        for i in blocks:
+            n = len(m.cells[i].data)
+            out[i] = rep[start:start + n]
+            start += n
+    return out
+
+
+def _is_gmsh(path) -> bool:
+    """A gmsh .msh file (its first line is $MeshFormat), whatever its name."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(64).lstrip().startswith(b"$MeshFormat")
+    except OSError:
+        return False
 
 
 def _check_node_ids(blocks, n_points: int, path) -> None:
@@ -546,6 +630,7 @@ def check_mesh(mesh: Mesh) -> None:
     _check_midsides(mesh)
     _check_quad_against_triangles(ft)
     _check_overlapping_faces(mesh, ft)
+    check_groups_on_surface(mesh, ft, _boundary_rows(ft), MeshError)
 
 
 def _check_structure(mesh: Mesh) -> None:
@@ -610,11 +695,30 @@ def _check_jacobians(mesh: Mesh) -> None:
     inverted, degenerate = np.concatenate(inverted), np.concatenate(degenerate)
     msgs = []
     if inverted.size:
-        msgs.append(f"inverted cells (det J < 0 at a corner or the centroid) {_fmt_ids(inverted)}")
+        msgs.append(f"inverted cells (det J < 0 at a corner or the centroid) {_fmt_ids(inverted)}"
+                    + _node_order_hint(mesh, inverted))
     if degenerate.size:
         msgs.append(f"degenerate cells (det J ~ 0, collapsed or flat) {_fmt_ids(degenerate)}")
     if msgs:
         raise MeshError("; ".join(msgs))
+
+
+def _node_order_hint(mesh: Mesh, inverted: np.ndarray) -> str:
+    """When every cell of a type is inverted, the file's node order (or orientation) is the likely cause."""
+    off = _offsets(mesh)
+    count: dict = {}
+    for bi, blk in enumerate(mesh.blocks):
+        hit = int(np.count_nonzero((inverted >= off[bi]) & (inverted < off[bi + 1])))
+        total, bad = count.get(blk.type, (0, 0))
+        count[blk.type] = (total + len(blk), bad + hit)
+    whole = [t for t, (total, bad) in count.items() if total and bad == total]
+    if not whole:
+        return ""
+    return (f"; every {' and every '.join(whole)} cell is inverted: the file's node order for "
+            f"{'this type' if len(whole) == 1 else 'these types'} is probably not VTK's (meshio's), or the "
+            "cells are mirrored (a surface mesh with its normal along -z, a mirrored part); tensormass reads "
+            "gmsh .msh files with their node order converted (see README, node order), "
+            "runtime.mesh.orient_cells renumbers mirrored cells")
 
 
 def _face_orientation(ft: _FaceTable, rows: np.ndarray):
@@ -846,7 +950,7 @@ def orient_cells(mesh: Mesh) -> Mesh:
         flip = np.all(_sample_dets(mesh.points, blk) < 0, axis=1)
         cells[flip] = cells[flip][:, list(_types.get(blk.type).flip)]
         blocks.append(CellBlock(blk.type, cells, None if blk.tags is None else blk.tags.copy()))
-    return Mesh(mesh.points.copy(), blocks)
+    return Mesh(mesh.points.copy(), blocks, list(mesh.groups))    # same nodes and cell ids: same groups
 
 
 # --------------------------------------------------------------------------- bar generators

@@ -30,12 +30,11 @@ from . import loads as _loads
 from .integrators import outputs_for
 from .mass import MassMatrix
 from .pressure import FollowerPressure
-from .mesh import Mesh, boundary_faces, check_mesh
-from .mesh import face_measure as _face_measure  # face types: the element table
+from .mesh import Mesh, check_mesh
 from .motion import Motion
-from .probes import locate_point
+from .probes import PointProbe, locate_point
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
-                      prescribed_values, reachable_laws, switch_parameters)
+                      prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from .scene import Loads, Output, Solver
 from .scene_mesh import build_mesh, scene_mesh
 
@@ -177,7 +176,7 @@ class Model:
         # prescribed displacements and loads over time: amplitudes, rigid motions (runtime.motion)
         self.amplitudes = list(amplitudes)
         self.motion = Motion(self, list(fixed), self.amplitudes)
-        self.probes = {p.name: self._point_probe(p) for p in probes}      # runtime.probes.PointProbe
+        self.probes = {p.name: self._probe(p, i) for i, p in enumerate(probes)}   # runtime.probes.PointProbe
         self.scene = None
         self.build_time = time.perf_counter() - start
 
@@ -299,7 +298,10 @@ class Model:
     def _constraints(self, fixed) -> tuple:
         """Sorted fixed dofs and the full prescribed displacement of each (at load factor 1)."""
         for i, fx in enumerate(fixed):
-            self._nodes_in(fx.box, f"fixed[{i}]")
+            if getattr(fx, "region", None) is not None:     # a mesh group: runtime.regions
+                selection_nodes(self.mesh, fx, f"fixed[{i}]", self.box_tol)
+            else:
+                self._nodes_in(fx.box, f"fixed[{i}]")
             n = self.dofs_per_node
             comps = np.arange(n) if fx.components is None else np.asarray(fx.components, dtype=int)
             if comps.size == 0 or comps.min() < 0 or comps.max() >= n:
@@ -307,7 +309,8 @@ class Model:
             if fx.displacement is not None:
                 self._vector(fx.displacement, f"fixed[{i}].displacement", max(self.n_load, int(comps.max()) + 1))
         # entries that give one dof different values are refused there (the order would decide)
-        value, self.fixed_owner = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node)
+        value, self.fixed_owner = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node,
+                                                    mesh=self.mesh)
         target = value.ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
         # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
@@ -331,6 +334,9 @@ class Model:
                 np.add.at(self._loaded(f), part.cells[rows], shares[:, :, None] * g)
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
+            if getattr(load, "region", None) is not None:   # a mesh group (and box): runtime.regions
+                self._add_region_load(self._loaded(f), load, force, i)
+                continue
             if load.kind == "force":
                 nodes = self._nodes_in(load.box, f"loads.nodal[{i}]")
                 self._loaded(f)[nodes] += force / nodes.size
@@ -360,9 +366,14 @@ class Model:
             value = float(load.value)
             if not np.isfinite(value):
                 raise TensormassError(f"loads.pressure[{i}].value must be a finite number, got {load.value!r}")
-            faces = self._faces_in(load.box)
+            if getattr(load, "region", None) is not None:
+                faces = region_faces(self.mesh, load.region, load.box, key=f"loads.pressure[{i}].region",
+                                     tol=self.box_tol, what="a pressure")
+            else:
+                faces = self._faces_in(load.box)
             if not faces:
-                raise TensormassError(f"loads.pressure[{i}]: no boundary face inside box {load.box!r}")
+                where = f"in region {load.region!r}" if getattr(load, "region", None) is not None else f"inside box {load.box!r}"
+                raise TensormassError(f"loads.pressure[{i}]: no boundary face {where}")
             loads.append((faces, value))
         if not loads:
             return None
@@ -371,9 +382,28 @@ class Model:
         pressure.symmetric = pressure.closed or self.solver.linear == "cg"
         return pressure
 
-    def _point_probe(self, probe):
-        """The cell holding the probe's point and its shape functions there (runtime.probes)."""
-        return locate_point(self.mesh, self._vector(probe.point, f"probe {probe.name!r} point", self.dim), probe.name)
+    def _add_region_load(self, f, load, value, i):
+        """A force (split evenly over the region's nodes) or a traction (f_a = int N_a t dA over the
+        region's boundary faces, runtime.loads) on a mesh region (and box)."""
+        key = f"loads.nodal[{i}]"
+        if load.kind == "force":
+            nodes = selection_nodes(self.mesh, load, key, self.box_tol)
+            f[nodes] += value / nodes.size
+            return
+        faces = region_faces(self.mesh, load.region, load.box, key=f"{key}.region", tol=self.box_tol,
+                             what="a traction")
+        if not faces:
+            raise TensormassError(f"{key} (traction): region {load.region!r} has no boundary face")
+        f += _loads.traction(self.mesh.points, faces, value)
+
+    def _probe(self, probe, i: int) -> PointProbe:
+        """A point probe: the cell holding the point and its shape functions there; a region/box
+        probe: the mean of its nodes (the same nodes/weights form, runtime.probes)."""
+        if getattr(probe, "point", None) is not None:
+            return locate_point(self.mesh, self._vector(probe.point, f"probe {probe.name!r} point", self.dim),
+                                probe.name)
+        nodes = selection_nodes(self.mesh, probe, f"probe[{i}]", self.box_tol)
+        return PointProbe(probe.name, None, -1, nodes, np.full(nodes.size, 1.0 / nodes.size), np.zeros(0), 0.0)
 
     # -- helpers for the integrators ------------------------------------------------------------
     def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:

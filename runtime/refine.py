@@ -98,6 +98,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import elements as _types
+from .mesh_groups import carry_groups
 from .mesh import CellBlock, Mesh, MeshError
 
 __all__ = ["Refinement", "refine", "interpolate_nodal", "REFINABLE_TYPES"]
@@ -235,7 +236,9 @@ def refine(mesh: Mesh, marked, *, propagate: bool = False) -> Refinement:
     counts = np.bincount(cell_parent, minlength=n_cells)
     P = np.array(bis.midpoints, dtype=np.int64).reshape(-1, 2)
     points = np.array(bis.points, dtype=np.float64).reshape(-1, mesh.dim)
-    return Refinement(Mesh(points, blocks), P, cell_parent.astype(np.int64), int(np.count_nonzero(counts > 1)))
+    refined = Mesh(points, blocks)
+    refined.groups = carry_groups(mesh, refined, P, cell_parent)        # regions of the file, refined too
+    return Refinement(refined, P, cell_parent.astype(np.int64), int(np.count_nonzero(counts > 1)))
 
 
 def _length2(p, q) -> float:

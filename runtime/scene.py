@@ -24,7 +24,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     element = "hexahedron"                  # tetra tetra10 wedge pyramid mixed | 2D: quad (default) triangle triangle6 mixed
     origin = [0.0, 0.0, 0.0]
     [[material]]                            # first match wins
-    region = "all"                          # "all", an element type, or an integer cell tag
+    region = "all"                          # "all", an element type, an integer cell tag / group id, or a group name
     box = [[x0, y0, z0], [x1, y1, z1]]      # optional: cells whose centroid is inside (and region)
     law = "stvk"
     quadrature = "gauss2"
@@ -33,6 +33,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     density = 800.0
     [[fixed]]
     box = [[...], [...]]                    # nodes inside: clamped, or
+    region = "attached"                     # instead of / with box: the nodes of a mesh group (name or id)
     displacement = [0.0, 0.0, -0.01]        # prescribed (a full vector), on
     components = [2]                        # these components only (default: all)
     amplitude = "press"                     # optional: an [[amplitude]] scales it over time (default: the ramp)
@@ -48,7 +49,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     gravity = [0.0, 0.0, -9.81]
     gravity_amplitude = "press"             # optional; force and traction loads take amplitude = "..."
     [[loads.force]]                         # total force, split evenly over the nodes in the box
-    box = [[...], [...]]
+    box = [[...], [...]]                    # and/or region = "<group>" (both: the intersection)
     value = [0.0, 0.0, -10.0]
     [[loads.traction]]                      # force per unit area of the boundary faces in the box
     box = [[...], [...]]
@@ -59,7 +60,8 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [solver]                                # the Solver fields below (mass = "lumped" | "consistent")
     [[probe]]                               # u interpolated at the point (runtime.probes)
     name = "tip"
-    point = [1.2, 0.1, 0.1]                 # inside the body or on it within 10 % of a cell
+    point = [1.2, 0.1, 0.1]                 # interpolated; inside the body or on it within 10 % of a cell
+    # or region = "<group>" and/or box = [[...], [...]]: the mean displacement of those nodes
     [output]
     dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10
@@ -104,7 +106,8 @@ class MeshSpec:
 
 @dataclass
 class Material:
-    """First match wins. region: "all", an element type name, or an integer cell tag; or box."""
+    """First match wins. region: "all", an element type name, an integer cell tag (volume group id), or a
+    volume group's name (runtime.regions); or box."""
     region: str | int = "all"
     box: tuple | None = None             # ((x0, y0, z0), (x1, y1, z1)): cells whose centroid is inside
     law: str = "stvk"
@@ -123,26 +126,29 @@ class Material:
 
 @dataclass
 class Fixed:
-    box: tuple                            # nodes inside are constrained
+    box: tuple | None                     # nodes inside are constrained (None: region only)
     displacement: tuple | None = None     # None: clamped (zero); else prescribed displacement vector
     components: tuple | None = None       # which components (0, 1, 2) are constrained; None = all
     amplitude: str | None = None          # [[amplitude]] name scaling the displacement/motion; None: the ramp
     rotation: Rotation | None = None      # rigid motion (runtime.motion): rotation about an axis ...
     translation: tuple | None = None      # ... and/or translation, applied as true rotations at every step
+    region: str | int | None = None       # a mesh group (name or id): its nodes (with box: those inside)
 
 
 @dataclass
 class NodalLoad:
-    box: tuple                            # force applied to the nodes inside the box
+    box: tuple | None                     # force applied to the nodes inside the box (None: region only)
     force: tuple                          # total force, split evenly over those nodes
     kind: str = "force"                   # "force" (total, split over nodes) or "traction" (per unit area of boundary faces inside the box)
     amplitude: str | None = None          # [[amplitude]] name; None: ramp (static), constant (dynamic)
+    region: str | int | None = None       # a mesh group (name or id): its nodes / boundary faces (with box: inside)
 
 
 @dataclass
 class PressureLoad:
-    box: tuple                            # boundary faces whose nodes all lie inside the box
+    box: tuple | None                     # boundary faces whose nodes all lie inside the box (None: region only)
     value: float                          # Pa, normal to the current surface; > 0 pushes inward
+    region: str | int | None = None       # a mesh group (name or id): its boundary faces (with box: inside)
 
 
 @dataclass
@@ -177,7 +183,9 @@ class Solver:
 @dataclass
 class Probe:
     name: str
-    point: tuple
+    point: tuple | None                   # the nearest node's displacement; or:
+    region: str | int | None = None       # the mean displacement of a group's nodes (with box: those inside)
+    box: tuple | None = None              # ... or of the nodes inside a box
 
 
 @dataclass
@@ -311,14 +319,14 @@ _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "
         "amplitude")
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
-_FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation")
+_FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region")
 _LOADS = ("gravity", "force", "traction", "pressure", "gravity_amplitude")
-_LOAD = ("box", "value")
+_LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass")
-_PROBE = ("name", "point")
+_PROBE = ("name", "point", "region", "box")
 _OUTPUT = ("dir", "every")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
@@ -442,6 +450,14 @@ class _Parser:
             raise SceneError(f"{key}: expected {what} components, got {len(value)}{extra}")
         return tuple(self.number(v, f"{key}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value))
 
+    @staticmethod
+    def region(value, key):
+        """A region of the mesh: a group name (non-empty string) or an integer id (runtime.regions)."""
+        if isinstance(value, bool) or not isinstance(value, (str, int)) or (isinstance(value, str) and not value.strip()):
+            raise SceneError(f"{key}: expected a region name (a string) or an integer id, got "
+                             f"{_type_name(value)} {_fmt(value)}")
+        return value
+
     def box(self, value, key) -> tuple:
         if not isinstance(value, list) or len(value) != 2:
             raise SceneError(f"{key}: expected [[min...], [max...]] (two corner points), got {_fmt(value)}")
@@ -544,11 +560,16 @@ class _Parser:
         self.keys(t, key, _MATERIAL, law.parameters)
         region = t.get("region", "all")
         if isinstance(region, bool) or not isinstance(region, (str, int)):
-            raise SceneError(f"{key}.region: expected \"all\", an element type or an integer cell tag, "
-                             f"got {_type_name(region)}")
-        if isinstance(region, str) and region not in ("all",) + CELL_TYPES:
-            raise SceneError(f"{key}.region: unknown region {region!r}; use \"all\", an element type "
-                             f"({', '.join(CELL_TYPES)}), an integer cell tag, or box = [[...], [...]]")
+            raise SceneError(f"{key}.region: expected \"all\", an element type, an integer cell tag or a "
+                             f"region (group) name, got {_type_name(region)}")
+        if isinstance(region, str) and not region.strip():
+            raise SceneError(f"{key}.region: must not be empty; use \"all\", an element type "
+                             f"({', '.join(CELL_TYPES)}), an integer cell tag, a region (group) name of the mesh, "
+                             "or box = [[...], [...]]")
+        if isinstance(region, str) and region not in ("all",) + CELL_TYPES and self.dim is not None:
+            raise SceneError(f"{key}.region: unknown region {region!r}; a generated mesh has no named regions: "
+                             f"use \"all\", an element type ({', '.join(CELL_TYPES)}), an integer cell tag, "
+                             "or box = [[...], [...]]")
         box = self.box(t["box"], f"{key}.box") if "box" in t else None
         quadrature = self.string(t.get("quadrature", "gauss2"), f"{key}.quadrature")
         self._check_combination(key, region, law_name, quadrature)
@@ -589,7 +610,7 @@ class _Parser:
     @staticmethod
     def _check_combination(key, region, law, quadrature):
         """Early check of (element, law, quadrature); validate() repeats it per cell type of the mesh."""
-        if isinstance(region, str) and region != "all":
+        if isinstance(region, str) and region in CELL_TYPES:
             _catalogue_check(f"{key}.quadrature", region, law, quadrature)
             return
         try:
@@ -600,24 +621,27 @@ class _Parser:
     def fixed(self, t, key) -> Fixed:
         t = self.table(t, key)
         self.keys(t, key, _FIXED)
-        if "box" not in t:
-            raise SceneError(f"{key}.box: missing (nodes inside the box are constrained)")
-        box = self.box(t["box"], f"{key}.box")
-        disp = self.vector(t["displacement"], f"{key}.displacement", dim=len(box[0])) if "displacement" in t else None
+        if "box" not in t and "region" not in t:
+            raise SceneError(f"{key}.box: missing (nodes inside the box are constrained; or give "
+                             "region = \"<group name or id>\")")
+        box = self.box(t["box"], f"{key}.box") if "box" in t else None
+        region = self.region(t["region"], f"{key}.region") if "region" in t else None
+        bdim = len(box[0]) if box is not None else self.dim
+        disp = self.vector(t["displacement"], f"{key}.displacement", dim=bdim) if "displacement" in t else None
         comps = None
         if "components" in t:
             raw = t["components"]
             if not isinstance(raw, list) or not raw:
                 raise SceneError(f"{key}.components: expected a non-empty array of component indices")
-            dim = len(box[0])
+            dim = bdim or 3
             comps = tuple(self.integer(c, f"{key}.components[{i}]", 0) for i, c in enumerate(raw))
             if max(comps) >= dim:
                 raise SceneError(f"{key}.components: component {max(comps)} does not exist in {dim}D "
                                  f"(use 0..{dim - 1})")
             if len(set(comps)) != len(comps):
                 raise SceneError(f"{key}.components: repeated component in {list(comps)}")
-        fixed = Fixed(box=box, displacement=disp, components=comps)
-        self.motion(t, key, fixed, len(box[0]))
+        fixed = Fixed(box=box, displacement=disp, components=comps, region=region)
+        self.motion(t, key, fixed, len(box[0]) if box is not None else (self.dim or 3))
         return fixed
 
     def motion(self, t, key, fixed, dim) -> None:
@@ -650,23 +674,25 @@ class _Parser:
             for i, lt in enumerate(self.tables(t.get(kind, []), f"loads.{kind}")):
                 key = f"loads.{kind}[{i}]"
                 self.keys(lt, key, _LOAD, _LOAD_OPTIONAL)
-                for k in _LOAD:
-                    if k not in lt:
-                        raise SceneError(f"{key}.{k}: missing")
-                box = self.box(lt["box"], f"{key}.box")
-                value = self.vector(lt["value"], f"{key}.value", dim=len(box[0]))
-                nodal.append(NodalLoad(box=box, force=value, kind=kind))
+                for k in ("box", "value"):
+                    if k not in lt and not (k == "box" and "region" in lt):
+                        raise SceneError(f"{key}.{k}: missing" + (" (or give region = \"<group>\")" if k == "box" else ""))
+                box = self.box(lt["box"], f"{key}.box") if "box" in lt else None
+                region = self.region(lt["region"], f"{key}.region") if "region" in lt else None
+                value = self.vector(lt["value"], f"{key}.value", dim=len(box[0]) if box is not None else None)
+                nodal.append(NodalLoad(box=box, force=value, kind=kind, region=region))
                 if "amplitude" in lt:
                     nodal[-1].amplitude = self.string(lt["amplitude"], f"{key}.amplitude")
         pressure = []
         for i, lt in enumerate(self.tables(t.get("pressure", []), "loads.pressure")):
             key = f"loads.pressure[{i}]"
             self.keys(lt, key, _LOAD)
-            for k in _LOAD:
-                if k not in lt:
-                    raise SceneError(f"{key}.{k}: missing")
-            pressure.append(PressureLoad(box=self.box(lt["box"], f"{key}.box"),
-                                         value=self.number(lt["value"], f"{key}.value")))
+            for k in ("box", "value"):
+                if k not in lt and not (k == "box" and "region" in lt):
+                    raise SceneError(f"{key}.{k}: missing" + (" (or give region = \"<group>\")" if k == "box" else ""))
+            pressure.append(PressureLoad(box=self.box(lt["box"], f"{key}.box") if "box" in lt else None,
+                                         value=self.number(lt["value"], f"{key}.value"),
+                                         region=self.region(lt["region"], f"{key}.region") if "region" in lt else None))
         if gravity is None:
             gravity = (0.0,) * (self.dim or 3)
         out = Loads(gravity=gravity, nodal=nodal, pressure=pressure)
@@ -717,11 +743,20 @@ class _Parser:
     def probe(self, t, key, index) -> Probe:
         t = self.table(t, key)
         self.keys(t, key, _PROBE)
-        if "point" not in t:
-            raise SceneError(f"{key}.point: missing")
+        if "point" not in t and "region" not in t and "box" not in t:
+            raise SceneError(f"{key}.point: missing (or give region = \"<group>\" and/or box: the mean "
+                             "displacement of their nodes)")
+        if "point" in t and ("region" in t or "box" in t):
+            extra = "region" if "region" in t else "box"
+            raise SceneError(f"{key}.{extra}: give either point (the nearest node) or region/box (the mean over "
+                             "their nodes), not both")
         name = self.string(t.get("name", f"probe{index}"), f"{key}.name")
         if not name:
             raise SceneError(f"{key}.name: must not be empty")
+        if "point" not in t:
+            return Probe(name=name, point=None,
+                         region=self.region(t["region"], f"{key}.region") if "region" in t else None,
+                         box=self.box(t["box"], f"{key}.box") if "box" in t else None)
         return Probe(name=name, point=self.vector(t["point"], f"{key}.point"))
 
     def adapt(self, t, key) -> Adapt:

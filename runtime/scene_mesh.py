@@ -23,7 +23,7 @@ from .mesh import MeshError, check_coordinates
 from .probes import PROBE_CELL_FRACTION, ProbeError, locate_point
 from .refine import REFINABLE_TYPES
 from .regions import (assign_materials, box_contains, box_tolerance, check_unused_materials, prescribed_values,
-                      reachable_laws, switch_parameters)
+                      reachable_laws, region_faces, selection_nodes, switch_parameters)
 
 __all__ = ["load_mesh", "scene_mesh", "build_mesh", "check_against_mesh", "catalogue_check", "PROBE_TOLERANCE"]
 
@@ -135,27 +135,38 @@ def check_against_mesh(scene, mesh) -> None:
         if m.box is not None:
             vec(m.box[0], f"material[{i}].box")
     for i, f in enumerate(scene.fixed):
-        vec(f.box[0], f"fixed[{i}].box")
+        if f.box is not None:
+            vec(f.box[0], f"fixed[{i}].box")
         vec(f.displacement, f"fixed[{i}].displacement")
         if f.components is not None and max(f.components) >= dim:
             raise SceneError(f"fixed[{i}].components: component {max(f.components)} does not exist in {dim}D")
-        if not box_contains(f.box, mesh.points, tol).any():
+        if getattr(f, "region", None) is not None:          # a mesh group (and box): runtime.regions
+            selection_nodes(mesh, f, f"fixed[{i}]", tol)
+        elif not box_contains(f.box, mesh.points, tol).any():
             raise SceneError(f"fixed[{i}].box: no mesh node inside{bounds}")
     counters = {"force": 0, "traction": 0}
     for load in scene.loads.nodal:
         key = f"loads.{load.kind}[{counters[load.kind]}]"
         counters[load.kind] += 1
-        vec(load.box[0], f"{key}.box")
+        if load.box is not None:
+            vec(load.box[0], f"{key}.box")
         vec(load.force, f"{key}.value")
-        if not box_contains(load.box, mesh.points, tol).any():
+        if getattr(load, "region", None) is not None:
+            _check_region_load(mesh, load, key, tol)
+        elif not box_contains(load.box, mesh.points, tol).any():
             raise SceneError(f"{key}.box: no mesh node inside{bounds}")
     for i, load in enumerate(getattr(scene.loads, "pressure", ())):
         vec(load.box[0], f"loads.pressure[{i}].box")
         if not box_contains(load.box, mesh.points, tol).any():
             raise SceneError(f"loads.pressure[{i}].box: no mesh node inside{bounds}")
     for i, p in enumerate(scene.probes):
+        if p.point is None:                                 # region and/or box: the mean over their nodes
+            if getattr(p, "box", None) is not None:
+                vec(p.box[0], f"probe[{i}].box")
+            selection_nodes(mesh, p, f"probe[{i}]", tol)
+            continue
         vec(p.point, f"probe[{i}].point")
-    prescribed_values(scene.fixed, mesh.points, tol)
+    prescribed_values(scene.fixed, mesh.points, tol, mesh=mesh)
     _check_probes(scene, mesh)
 
     # every cell needs a material, and every (cell type, law, quadrature) in use must exist
@@ -176,9 +187,21 @@ def check_against_mesh(scene, mesh) -> None:
     _check_adapt(scene, mesh, which)
 
 
+def _check_region_load(mesh, load, key, tol) -> None:
+    """A load on a region selects nodes (force) or boundary faces (traction); none is an error."""
+    if load.kind != "traction":
+        selection_nodes(mesh, load, key, tol)
+        return
+    if not region_faces(mesh, load.region, load.box, key=f"{key}.region", tol=tol, what="a traction"):
+        where = "" if load.box is None else " inside its box"
+        raise SceneError(f"{key}: region {load.region!r} has no boundary face{where}")
+
+
 def _check_probes(scene, mesh) -> None:
     """Every probe point must lie inside the body or on it within a tolerance (runtime.probes)."""
     for i, p in enumerate(scene.probes):
+        if p.point is None:               # region / box probes: checked in check_against_mesh
+            continue
         try:
             locate_point(mesh, p.point, p.name)
         except ProbeError as exc:

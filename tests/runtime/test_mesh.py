@@ -5,7 +5,7 @@ import meshio
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import (NODES_PER_CELL, SOLID_TYPES_2D, SOLID_TYPES_3D, CellBlock, Mesh,
+from tensormass.runtime.mesh import (GMSH_TO_VTK, NODES_PER_CELL, SOLID_TYPES_2D, SOLID_TYPES_3D, CellBlock, Mesh,
                                      MeshError, boundary_faces, check_mesh, generate_bar, orient_cells,
                                      read_mesh, to_meshio)
 
@@ -390,11 +390,13 @@ def test_tags_split_blocks(tmp_path):
     assert np.array_equal(np.vstack([b.cells for b in back.blocks]), m.blocks[0].cells)
 
 
-def test_gmsh22_round_trip_drops_boundary_cells(tmp_path):
+def test_gmsh22_round_trip_keeps_boundary_cells_as_groups(tmp_path):
     m = generate_bar(element="mixed")
     quads = [f for b, _, f in boundary_faces(m) if len(f) == 4]
-    cells = [(b.type, b.cells) for b in m.blocks] + [("quad", np.array(quads)), ("line", np.array([[0, 1]])),
-                                                     ("vertex", np.array([[0]]))]
+    # a .msh file holds gmsh's node order: its prism winds the base the other way (GMSH_TO_VTK)
+    gmsh_order = [b.cells[:, GMSH_TO_VTK[b.type]] if b.type in GMSH_TO_VTK else b.cells for b in m.blocks]
+    cells = [(b.type, c) for b, c in zip(m.blocks, gmsh_order)] + [
+        ("quad", np.array(quads)), ("line", np.array([[0, 1]])), ("vertex", np.array([[0]]))]
     phys = [np.full(len(c), 10 + i) for i, (_, c) in enumerate(cells)]
     mm = meshio.Mesh(m.points, cells, cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys})
     path = tmp_path / "bar.msh"
@@ -408,6 +410,13 @@ def test_gmsh22_round_trip_drops_boundary_cells(tmp_path):
         assert np.array_equal(by_type[b.type].cells, b.cells)
         assert np.all(by_type[b.type].tags == 10 + i)
     check_mesh(back)
+    # the boundary cells are kept as groups of their dimension (no names in this file: ids only)
+    groups = {g.id: g for g in back.groups}
+    assert sorted(groups) == [10, 11, 12, 13, 14, 15, 16]
+    assert [groups[i].dim for i in range(10, 17)] == [3, 3, 3, 3, 2, 1, 0]
+    assert np.array_equal(groups[14].cells["quad"], np.array(quads))
+    assert groups[15].cells["line"].tolist() == [[0, 1]] and groups[16].cells["vertex"].tolist() == [[0]]
+    assert groups[11].cell_ids.size == len(m.blocks[1]) and groups[14].cell_ids.size == 0
 
 
 def test_read_errors(tmp_path):
