@@ -466,3 +466,7 @@ def outputs_for(kind: str) -> tuple:
 
 def make_integrator(ctx: Context):
     return integrator_class(ctx.model.solver.kind)(ctx)
+
+
+# generalized-alpha (runtime/integrators_alpha.py) builds on the classes above and adds itself to _KINDS
+from . import integrators_alpha  # noqa: E402,F401
