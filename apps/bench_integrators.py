@@ -10,6 +10,9 @@ period measured from the tip's oscillation in the generalized-alpha rho_inf = 1
 run at the smallest dt), the largest deviation over the run, Newton iterations
 and wall time.  Implicit schemes run at dt = 10 ms and 1 ms (1000 steps each);
 the explicit one at half its stable step at rest, over the 10 ms runs' time.
+Then the order of accuracy: end-state errors (relative 2-norm of u and T v) of a
+large release (tip 0.84 m) for halved steps against a fine generalized-alpha
+reference (ratio 4: second order) and the observed order (least-squares slope).
 
     tensormass bench integrators [--json FILE] [--quick]
     from tensormass.apps.bench_integrators import run_integrator_bench
@@ -90,6 +93,49 @@ def _run(cells, u0, E0, tip_node, label, kind, dt, steps, extra, every=1) -> dic
             "_tip": (recorder.t, recorder.z)}
 
 
+# Order of accuracy: a large release (6 x 1 x 1 hexahedra, bent by 30 m/s^2, tip 0.84 m), 0.4 s without
+# load or damping; the end state (u and T v) of each scheme at n steps against generalized-alpha at N_REF
+ORDER_CELLS, ORDER_GRAVITY, ORDER_TIME = (6, 1, 1), 30.0, 0.4
+ORDER_STEPS, QUICK_ORDER_STEPS = (160, 320, 640, 1280), (20, 40)
+ORDER_REF, QUICK_ORDER_REF = 5120, 160
+ORDER_RUNS = (("generalized_alpha rho_inf=1", "generalized_alpha", {"rho_inf": 1.0}),
+              ("generalized_alpha rho_inf=0.5", "generalized_alpha", {"rho_inf": 0.5}),
+              ("backward_euler", "backward_euler", {}),
+              ("implicit_euler", "implicit_euler", {}))
+
+
+def _end_state(u0, kind, n, extra) -> np.ndarray:
+    sim = Simulation(_scene(ORDER_CELLS, 0.0, kind=kind, steps=n, dt=ORDER_TIME / n, rayleigh=(0.0, 0.0),
+                            newton_tolerance=1e-12, **extra), u0=u0)
+    sim.run()
+    return np.concatenate([sim.displacement.ravel(), ORDER_TIME * sim.velocity.ravel()])
+
+
+def run_order_study(quick: bool = False, progress=print) -> dict:
+    """Errors at the end of the large release for halved steps, and their ratios (4: second order)."""
+    bent = Simulation(_scene(ORDER_CELLS, ORDER_GRAVITY))
+    bent.run()
+    u0 = bent.displacement
+    n_ref = QUICK_ORDER_REF if quick else ORDER_REF
+    ref = _end_state(u0, "generalized_alpha", n_ref, {"rho_inf": 1.0})
+    rows = []
+    for label, kind, extra in ORDER_RUNS:
+        steps = QUICK_ORDER_STEPS if quick else ORDER_STEPS
+        errors = [float(np.linalg.norm(_end_state(u0, kind, n, extra) - ref) / np.linalg.norm(ref)) for n in steps]
+        ratios = [a / b for a, b in zip(errors, errors[1:])]
+        # observed order: least-squares slope of log(error) against log(dt)
+        order = float(np.polyfit(np.log(ORDER_TIME / np.array(steps)), np.log(errors), 1)[0])
+        rows.append({"label": label, "kind": kind, **extra, "errors": errors, "ratios": ratios,
+                     "observed_order": order})
+        if progress:
+            progress(f"order {label:30s} relative error of (u, T v) at {ORDER_TIME} s for {steps} steps: "
+                     + ", ".join(f"{e:.3g}" for e in errors) + "; ratios " + ", ".join(f"{r:.2f}" for r in ratios)
+                     + f"; observed order {order:.2f}")
+    return {"cells": ORDER_CELLS, "bend_gravity": ORDER_GRAVITY, "tip_deflection": float(-u0[:, 2].min()),
+            "time": ORDER_TIME, "steps": QUICK_ORDER_STEPS if quick else ORDER_STEPS, "reference_steps": n_ref,
+            "law": LAW, "results": rows}
+
+
 def run_integrator_bench(quick: bool = False, json_path=None, progress=print) -> dict:
     cells = QUICK_CELLS if quick else CELLS
     steps = QUICK_STEPS if quick else STEPS
@@ -142,6 +188,7 @@ def run_integrator_bench(quick: bool = False, json_path=None, progress=print) ->
                      f"energy lost {100 * r['loss']:7.3f} %{per}, "
                      f"max deviation {100 * r['max_deviation']:7.3f} %, Newton {r['newton_iterations']:5d}, "
                      f"{r['wall_s']:.1f} s, {r['status']}")
+    report["order"] = run_order_study(quick, progress)
     if json_path:
         write_json_atomic(json_path, report)
     return report

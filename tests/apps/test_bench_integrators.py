@@ -21,5 +21,7 @@ def test_quick_integrator_bench_writes_json(tmp_path, capsys):
     # more numerical damping as rho_inf goes down, all far below implicit Euler's
     losses = [rows[(f"generalized_alpha rho_inf={r}", 0.01)]["loss"] for r in ("1", "0.5", "0")]
     assert losses[0] < losses[1] < losses[2] < 0.1 * rows[("implicit_euler", 0.01)]["loss"]
+    order = {r["label"]: r for r in report["order"]["results"]}
+    assert len(order["backward_euler"]["errors"]) == 2 and order["backward_euler"]["ratios"][0] < 2.5
     for r in report["results"]:
         assert abs(r["loss_per_period"]) < 1 and r["steps_per_period"] > 0 and r["max_deviation"] >= abs(r["loss"])
