@@ -131,7 +131,8 @@ class GeneralizedAlpha(_Dynamic):
     def single(self, u, v, t, h):
         ctx, model = self.ctx, self.model
         fixed, free = model.fixed_dofs, model.free_dofs
-        a = self._acc[id(u)][1]
+        known = self._acc.get(id(u))
+        a = known[1] if known is not None and known[0] is u else self.initial_acceleration(u, v)
         am, af, gamma, beta = self.alpha_m, self.alpha_f, self.gamma, self.newmark_beta
         mass = self.mass
         K_n = None
