@@ -1,4 +1,4 @@
-"""The generalized-alpha integrator (runtime/integrators_alpha.py): energy, order, damping, robustness, input.
+"""The generalized-alpha integrator (runtime/integrators.py): energy, order, damping, robustness, input.
 
 Bodies: the soft cantilever of test_runtime (1.2 x 0.2 x 0.2 m, E = 1 MPa, 800 kg/m^3,
 first bending period ~1.3 s), bent by its own weight and released with the load removed.
@@ -13,7 +13,7 @@ from tensormass.runtime import integrators, resources
 from tensormass.runtime.assembly import assemble
 from tensormass.runtime.errors import SceneError, TensormassError
 from tensormass.runtime.integrators import Context, make_integrator
-from tensormass.runtime.integrators_alpha import GeneralizedAlpha, alpha_parameters
+from tensormass.runtime.integrators import GeneralizedAlpha, alpha_parameters
 from tensormass.runtime.model import Model
 from tensormass.runtime.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
 from tensormass.runtime.simulation import Simulation
