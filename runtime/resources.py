@@ -134,7 +134,7 @@ SECONDS_PER_ENTRY = 3e-9
 BAND_SECONDS = 3e-11
 CG_SECONDS = 1.5e-9
 CG_DYNAMIC_ITERATIONS = 100
-NEWTON_ITERATIONS = {"static": 4, "implicit_euler": 2, "backward_euler": 2, "explicit": 1}
+NEWTON_ITERATIONS = {"static": 4, "implicit_euler": 2, "backward_euler": 2, "explicit": 1, "generalized_alpha": 2}
 # The kernel output each solver calls per iteration: "stiffness" among an integrator's declared
 # outputs (runtime.integrators, not imported: it loads numba) means forces_and_stiffness; a test
 # checks this table against the declarations.

@@ -161,7 +161,7 @@ class Loads:
 
 @dataclass
 class Solver:
-    kind: str = "static"                  # static | implicit_euler | backward_euler | explicit
+    kind: str = "static"                  # static | implicit_euler | backward_euler | explicit | generalized_alpha
     dt: float = 0.01
     steps: int = 1                        # time steps (dynamic) or load steps (static)
     linear: str = "auto"                  # auto | direct | cg
@@ -171,6 +171,7 @@ class Solver:
     newton_max_iterations: int = 25
     rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)
     project_psd: bool | None = None       # None: plain Newton, projection switched on when a step fails to descend
+    rho_inf: float = 1.0                  # generalized_alpha: 1 = no numerical damping, < 1 damps high frequencies
     backend: str = "numba"                # kernel backend: numba | c
     # Health monitor (runtime/health.py): when a run leaves the trusted region
     health_monitor: bool = True           # false: no checks (a run may then end in a meaningless state)
@@ -325,14 +326,14 @@ _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
-           "max_displacement", "on_inversion", "mass")
+           "max_displacement", "on_inversion", "mass", "rho_inf")
 _PROBE = ("name", "point", "region", "box")
 _OUTPUT = ("dir", "every")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
 
-SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit")
+SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit", "generalized_alpha")
 # The cheapest step there is (explicit, one hexahedron) takes ~35 us on the benchmark
 # machine: 1e8 steps are an hour for a single cell and days for any real mesh (static
 # load steps cost a Newton solve each).  More is a typo (1e12, an extra 000), refused
@@ -737,7 +738,14 @@ class _Parser:
             s.mass = self.string(t["mass"], "solver.mass", MASS_KINDS)
             if s.mass == "consistent" and s.kind == "explicit":
                 raise SceneError("solver.mass: 'consistent' needs an implicit solver (implicit_euler, "
-                                 "backward_euler); explicit integration inverts the lumped (diagonal) mass")
+                                 "backward_euler, generalized_alpha); explicit integration inverts the lumped (diagonal) mass")
+        if "rho_inf" in t:
+            s.rho_inf = self.number(t["rho_inf"], "solver.rho_inf", min_value=0.0)
+            if s.rho_inf > 1.0:
+                raise SceneError(f"solver.rho_inf: must be <= 1 (got {_fmt(s.rho_inf)}); 1 = no numerical damping, "
+                                 "0 = the strongest high-frequency damping")
+            if s.kind != "generalized_alpha":
+                raise SceneError(f"solver.rho_inf: only used by kind = \"generalized_alpha\" (kind is {s.kind!r})")
         return s
 
     def probe(self, t, key, index) -> Probe:

@@ -137,7 +137,7 @@ def test_twisted_bar_end_rotates_exactly_at_every_static_step():
     assert math.degrees(math.atan2(c[2], c[1])) - 45.0 == pytest.approx(45.0, abs=5.0)
 
 
-@pytest.mark.parametrize("kind", ["implicit_euler", "backward_euler", "explicit"])
+@pytest.mark.parametrize("kind", ["implicit_euler", "backward_euler", "explicit", "generalized_alpha"])
 def test_twisted_bar_end_rotates_exactly_at_every_dynamic_step(kind):
     # the twist follows a time table: 0 -> 1 over 0.03 s, then held (the last steps hold the end still)
     amp = [{"name": "turn", "time": [0.0, 0.03], "value": [0.0, 1.0]}]
@@ -246,7 +246,8 @@ def test_a_dynamic_load_with_a_zero_amplitude_leaves_the_body_at_rest():
 
 def test_builtin_amplitudes_reproduce_the_defaults():
     grav = {"gravity": [0.0, 0.0, -9.81]}
-    for kind, fixed_amp, load_amp in (("static", "ramp", "ramp"), ("backward_euler", "ramp", "constant")):
+    for kind, fixed_amp, load_amp in (("static", "ramp", "ramp"), ("backward_euler", "ramp", "constant"),
+                                      ("generalized_alpha", "ramp", "constant")):
         default = dict(bar(kind, steps=4, angle=0.0), loads=grav)
         default["fixed"][1] = {"box": default["fixed"][1]["box"], "displacement": [0.01, 0.0, -0.02]}
         named = copy.deepcopy(default)
