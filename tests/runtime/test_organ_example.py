@@ -93,3 +93,15 @@ def test_make_organ_makes_the_shipped_mesh(tmp_path):
     assert [(b.type, len(b)) for b in new.blocks] == [(b.type, len(b)) for b in old.blocks]
     assert [(g.name, g.id, g.dim, g.n_cells()) for g in new.groups] == [(g.name, g.id, g.dim, g.n_cells()) for g in old.groups]
     assert np.allclose(new.points, old.points)
+
+
+def test_the_tool_scene_moves_the_cap_along_its_path():
+    # examples/organ/tool.toml: the "loaded" cap follows the press/slide tables (first 3 steps here)
+    scene = Scene.from_toml(ORGAN / "tool.toml")
+    scene.solver.steps = 3
+    sim = Simulation(scene)
+    summary = sim.run()
+    assert summary.status == "ok"
+    cap = region_nodes(sim.model.mesh, "loaded")
+    t = 3 * scene.solver.dt                           # press: 0 -> 1 over 0.3 s, slide still 0
+    assert np.allclose(sim.displacement.reshape(-1, 3)[cap], [0.0, 0.0, -0.006 * t / 0.3], atol=1e-15)
