@@ -8,7 +8,7 @@ Stages, each a module that takes plain data and returns plain data:
                          parameter-only subexpressions into per-element constants
   fragments              common-subexpression elimination into straight-line code
   ir                     KernelIR: everything a template needs, language neutral
-  backends               a printer and a template folder per language (numba, c)
+  (then ../backends/     one folder per language renders the IR: printer, templates, loader)
   catalogue, pipeline    what exists, and writing it to disk deterministically
 """
 GENERATOR_VERSION = "0.1.0"

@@ -55,8 +55,12 @@ class KernelIR:
     input_hash: str = ""
 
     @property
+    def dofs_per_node(self) -> int:
+        return self.dim
+
+    @property
     def n_dofs(self) -> int:
-        return self.n_nodes * self.dim
+        return self.n_nodes * self.dofs_per_node
 
     @property
     def n_constants(self) -> int:

@@ -1,23 +1,11 @@
-"""C backend: one C99 translation unit per kernel, plain loops over elements.
-
-The runtime (tensormass.runtime.compile) compiles the file into a shared
-library and calls it through cffi. The template computes exactly what the
-numba template computes, with the same array layouts (row-major, flat).
-"""
+"""C printing: sympy expressions as C99 (scalar and tm_vd vector code) and the template call."""
 from __future__ import annotations
-
-import json
 
 from sympy.printing.c import C99CodePrinter
 
-from . import environment, header_line, templates_hash
-from .printing import DoubleLiterals, power
-
-LANGUAGE = "c"
-SUFFIX = ".c"
-
-# Marks the metadata comment of a generated file; runtime/compile.py looks for it.
-METADATA_TAG = "tensormass-metadata"
+from ..printing import DoubleLiterals, power
+from ..render import environment, metadata_json, print_fragment, printed
+from .loader import METADATA_TAG
 
 # Small powers of a compound base: a call instead of the base repeated textually.
 _POWER_HELPERS = {2: "tm_sq", 3: "tm_cube", 4: "tm_pow4"}
@@ -64,7 +52,6 @@ class CVectorPrinter(CPrinter):
 
 def simd_context(ir) -> dict:
     """The law code printed for vectors: only calls differ from the scalar text."""
-    from . import print_fragment
     vec = CVectorPrinter()
     return {
         "law": {"gradient_tangent": [print_fragment(f, vec) for f in ir.law_code["gradient_tangent"]]},
@@ -72,35 +59,7 @@ def simd_context(ir) -> dict:
     }
 
 
-def metadata(ir) -> str:
-    """What the runtime needs to know about the kernel, as one line of JSON (sorted keys)."""
-    return json.dumps({
-        "name": ir.name,
-        "element": ir.element,
-        "law": ir.law,
-        "quadrature": ir.quadrature,
-        "dim": ir.dim,
-        "n_nodes": ir.n_nodes,
-        "n_points": ir.n_points,
-        "n_constants": ir.n_constants,
-        "n_dofs": ir.n_dofs,
-        "parameters": list(ir.parameters),
-        "requires_positive_J": bool(ir.requires_positive_J),
-        **({"recompute": True} if ir.recompute else {}),
-        "ops": dict(sorted(ir.ops.items())),
-        "templates": templates_hash(LANGUAGE)[:16],
-    }, sort_keys=True)
-
-
-def render(ir, context: dict) -> str:
-    return environment(LANGUAGE).get_template("kernel.c.j2").render(
-        ir=ir, header=header_line(ir, LANGUAGE), metadata=metadata(ir), metadata_tag=METADATA_TAG,
-        simd=simd_context(ir), **context)
-
-
-def printer():
-    return CPrinter()
-
-
-def file_name(ir) -> str:
-    return ir.name + SUFFIX
+def render(ir, backend) -> str:
+    return environment(backend).get_template("kernel.c.j2").render(
+        ir=ir, header=backend.header(ir), metadata=metadata_json(ir, backend), metadata_tag=METADATA_TAG,
+        simd=simd_context(ir), **printed(ir, CPrinter()))
