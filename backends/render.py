@@ -1,5 +1,5 @@
-"""What every backend's printer shares: the Jinja environment, the metadata dict and the IR's
-expressions printed as strings. Rendering only (imports jinja2; the
+"""What every backend's printer shares: the Jinja environment, the metadata dict and the
+reference tables as literals. Rendering only (imports jinja2; the
 loaders never import this module)."""
 from __future__ import annotations
 
@@ -54,32 +54,9 @@ def metadata_json(ir, backend) -> str:
     return json.dumps(metadata(ir, backend), sort_keys=True)
 
 
-def print_fragment(fragment, printer) -> dict:
+def tables(ir) -> dict:
+    """The reference tables every generated file holds, as exact double literals."""
     return {
-        "temps": [(str(s), printer.doprint(e)) for s, e in fragment.temporaries],
-        "outputs": [(name, printer.doprint(e)) for name, e in fragment.outputs],
-    }
-
-
-def printed(ir, printer) -> dict:
-    """The IR's expressions as code strings of one language: what templates receive."""
-    geometry = {
-        "temps": [(str(sym), printer.doprint(e)) for sym, e in ir.geometry.temporaries],
-        "G": [(b, printer.doprint(e)) for b, e in ir.geometry_G],
-    }
-    material = [(ir.material_offset + k, printer.doprint(e)) for k, (_, e) in enumerate(ir.material.outputs)]
-    law = {variant: [print_fragment(f, printer) for f in frags] for variant, frags in ir.law_code.items()}
-    chain = {
-        "forces": [(a, printer.doprint(e)) for a, e in ir.chain["forces"]],
-        "H": [(name, printer.doprint(e)) for name, e in ir.chain["H"]],
-        "K": [(a, c, printer.doprint(e)) for a, c, e in ir.chain["K"]],
-    }
-    return {
-        "geometry": geometry,
-        "material": material,
-        "law": law,
-        "J": printer.doprint(ir.J) if ir.J is not None else None,
         "dN_table": [[[float_literal(x) for x in node] for node in point] for point in ir.dN_table],
         "weights": [float_literal(w) for w in ir.weights],
-        "chain": chain,
     }
