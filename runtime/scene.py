@@ -63,6 +63,7 @@ from pathlib import Path
 
 from .. import elements as _element_types
 from .. import laws
+from ..backends import BACKENDS
 from ..generator.catalogue import entries
 from .errors import SceneError
 from .mesh import BAR_ELEMENTS, COORD_MAX
@@ -302,7 +303,6 @@ MAX_STEPS = 100_000_000
 _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days on a real mesh"
 LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
-BACKENDS = ("numba", "c")
 GENERATORS = ("bar",)
 ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
 ELEMENTS_2D = BAR_ELEMENTS[2]
