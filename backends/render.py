@@ -24,7 +24,7 @@ def metadata(ir, backend) -> dict:
     """What the runtime needs to know about a kernel; the same keys for every backend
     (backends.METADATA_KEYS), including the layout of the per-element constants D:
     per point q, D[q * point_stride + point_fields[f]] starts field f (v: the weight x det J,
-    G: the shape gradients, node-major, G[i][b] at + i * dofs_per_node + b); the material
+    G: the shape gradients, node-major, G[i][b] at + i * dim + b); the material
     constants start at material_offset. Recompute kernels store rest coordinates instead
     (point_stride 0, no point fields)."""
     return {

@@ -47,7 +47,7 @@ class Kernel:
         self.n_dofs = int(meta["n_dofs"])
         self.dofs_per_node = int(meta["dofs_per_node"])
         # Layout of D: per point q, D[q * point_stride + v_offset] = weight x det J and the shape
-        # gradients G[i][b] at q * point_stride + G_offset + i * dofs_per_node + b; then the material.
+        # gradients G[i][b] (b < dim) at q * point_stride + G_offset + i * dim + b; then the material.
         self.point_stride = int(meta["point_stride"])
         self.point_fields = dict(meta["point_fields"])
         self.v_offset = self.point_fields.get("v")
@@ -68,8 +68,8 @@ class Kernel:
         D = np.asarray(D)
         n, s = len(D), self.point_stride
         block = D[:, :self.n_points * s].reshape(n, self.n_points, s)
-        G = block[:, :, self.G_offset:self.G_offset + self.n_nodes * self.dofs_per_node]
-        return G.reshape(n, self.n_points, self.n_nodes, self.dofs_per_node)
+        G = block[:, :, self.G_offset:self.G_offset + self.n_nodes * self.dim]
+        return G.reshape(n, self.n_points, self.n_nodes, self.dim)
 
     def _need_points(self):
         if self.recompute:

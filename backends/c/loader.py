@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import KERNEL_FUNCTIONS, BackendError, check_metadata
+from ..protocol import KERNEL_FUNCTIONS, BackendError, check_metadata
 
 CFLAGS = ("-O3", "-march=native", "-fPIC", "-shared", "-std=c99", "-fno-math-errno")
 LIBS = ("-lm",)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .. import Backend
+from ..protocol import Backend
 from . import loader
 
 

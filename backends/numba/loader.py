@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from .. import BackendError, check_metadata
+from ..protocol import BackendError, check_metadata
 
 METADATA_PREFIX = "METADATA = json.loads('"
 COMMITTED_PACKAGE = "tensormass.generated.numba"
