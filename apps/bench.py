@@ -31,9 +31,9 @@ import numpy as np
 
 from ..generator.catalogue import Entry
 from ..generator.catalogue import entries as catalogue
-from ..runtime.compile import build, cflags, compiler, source_path
+from ..backends.c.loader import build, cflags, compiler
 from ..runtime.errors import TensormassError
-from ..runtime.kernels import BACKENDS, load_kernel, load_recompute_kernel
+from ..runtime.kernels import BACKENDS, kernel_source, load_kernel, load_recompute_kernel
 from ..runtime.output import write_json_atomic
 from ..runtime.samples import random_elements
 from .bench_integrators import add_integrators_command
@@ -114,7 +114,7 @@ def _c_compile_record(kernel) -> dict:
 def compile_c(entry) -> dict:
     """Compile the entry's C kernel into a temporary folder; {'seconds', 'maxrss_mb'}."""
     with tempfile.TemporaryDirectory(prefix="tensormass-bench-") as folder:
-        record = build(entry.name, source_path(entry), Path(folder) / f"{entry.name}.so", compiler(), cflags())
+        record = build(entry.name, kernel_source(entry.element, entry.law, entry.quadrature, "c"), Path(folder) / f"{entry.name}.so", compiler(), cflags())
     return {"seconds": record["seconds"], "maxrss_mb": record["maxrss_mb"]}
 
 
@@ -346,11 +346,11 @@ njit(lambda x: x + 1)(1)          # numba's one-off start-up, kept out of the ke
 init = time.perf_counter() - t0
 module = load_kernel(element, law, quadrature, backend="numba").module
 X = np.array([[float(x) for x in node] for node in reference(element).nodes])[None].copy()
-params = np.ones((1, len(module.PARAMETERS)))
-D = np.zeros((1, module.N_CONSTANTS))
+params = np.ones((1, len(module.METADATA["parameters"])))
+D = np.zeros((1, module.METADATA["n_constants"]))
 flags = np.zeros(1, dtype=np.int32)
 u = np.zeros_like(X)
-n = module.N_NODES * module.DIM
+n = module.METADATA["n_dofs"]
 calls = {
     "constants": lambda: module.constants(X, params, D, flags),
     "forces_and_stiffness": lambda: module.forces_and_stiffness(D, u, np.empty((1, n)), np.empty((1, n, n)), flags),

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from ..backends import BACKENDS
 from ..runtime.output import write_json_atomic
 from ..runtime.scene import Scene
 from .machine import machine_info
@@ -43,7 +44,6 @@ NEWTON_REPEATS, QUICK_NEWTON_REPEATS = 5, 2
 FELUPE_REPEATS, QUICK_FELUPE_REPEATS = 3, 1
 
 E, NU, DENSITY, GRAVITY = 1.0e6, 0.3, 1000.0, 9.81
-BACKENDS = ("numba", "c")
 
 
 def scene_text(element, cells, size, law, kind, linear, steps, backend="numba") -> str:

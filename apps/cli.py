@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import generated, laws
-from ..generator.backends import BACKENDS
+from ..backends import BACKENDS
 from ..generator.catalogue import entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
@@ -134,11 +134,11 @@ def report_numba_compile_times(selected, out: Path) -> None:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         X = np.array([[float(x) for x in node] for node in element(entry.element).nodes])[None].copy()
-        params = np.ones((1, len(module.PARAMETERS)))
-        D = np.empty((1, module.N_CONSTANTS))
+        params = np.ones((1, len(module.METADATA["parameters"])))
+        D = np.empty((1, module.METADATA["n_constants"]))
         flags = np.zeros(1, dtype=np.int32)
         u = np.zeros_like(X)
-        n = module.N_NODES * module.DIM
+        n = module.METADATA["n_dofs"]
         t0 = time.perf_counter()
         module.constants(X, params, D, flags)
         module.energy(D, u, np.empty(1), flags)

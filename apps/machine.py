@@ -8,7 +8,7 @@ import subprocess
 import numba
 import numpy as np
 
-from ..runtime.compile import cflags, compiler
+from ..backends.c.loader import cflags, compiler
 from ..runtime.errors import TensormassError
 
 

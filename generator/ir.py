@@ -1,7 +1,9 @@
 """KernelIR: everything a template needs to emit one (element, law, quadrature) kernel.
 
-Built from the earlier stages, language neutral (sympy expressions and names);
-a backend only prints it. The per-element constant vector D is laid out as
+Built once from the earlier stages (frozen: op counts, input hash and the kernel bodies are
+computed before construction), language neutral (sympy expressions and names); a backend
+only prints it. The algorithm of every kernel is data: `bodies`, the statement trees of
+generator/kernel_body.py. The per-element constant vector D is laid out as
   [point 0: v, G_0_0 .. G_{n-1}_{dim-1}] [point 1: ...] ... [material constants]
 so that the per-step code reads D and u only.
 """
@@ -9,7 +11,8 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from types import SimpleNamespace
 
 import sympy as sp
 
@@ -19,12 +22,13 @@ from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, split
+from .kernel_body import build_bodies
 from .quadrature import QuadratureRule, rule as get_rule, rule_for_degree
 
 EXACT = "exact"
 
 
-@dataclass
+@dataclass(frozen=True)
 class KernelIR:
     name: str
     element: str
@@ -50,13 +54,18 @@ class KernelIR:
     chain: dict                  # chain-rule statements (forces, tangent H, stiffness K)
     rule_points: tuple
     rule_weights: tuple
-    recompute: bool = False      # D holds rest coordinates; G and det J are recomputed every call
-    ops: dict = field(default_factory=dict)
-    input_hash: str = ""
+    recompute: bool              # D holds rest coordinates; G and det J are recomputed every call
+    ops: dict                    # floating-point operations per element, per kernel
+    input_hash: str              # hash of element, rule, law source, generator version
+    bodies: dict                 # kind -> statement tree of one element (generator/kernel_body.py)
+
+    @property
+    def dofs_per_node(self) -> int:
+        return self.dim
 
     @property
     def n_dofs(self) -> int:
-        return self.n_nodes * self.dim
+        return self.n_nodes * self.dofs_per_node
 
     @property
     def n_constants(self) -> int:
@@ -125,7 +134,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     material_names = tuple(name for name, _ in material.outputs)
     if recompute:
         names = [f"X[{i}][{k}]" for i in range(n) for k in range(dim)]
-    ir = KernelIR(
+    fields = dict(
         name=f"{element_name}_{law_name}_{quadrature}" + ("_recompute" if recompute else ""),
         element=element_name, law=law_name, quadrature=quadrature,
         dim=dim, n_nodes=n, n_points=rule.n_points,
@@ -148,9 +157,10 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         rule_weights=tuple(float(w) for w in rule.weights),
         recompute=recompute,
     )
-    ir.ops = _op_counts(ir)
-    ir.input_hash = _input_hash(ref, rule, law)
-    return ir
+    # Everything derived is computed before the IR exists: it is never patched afterwards.
+    draft = SimpleNamespace(**fields, n_dofs=n * dim, dofs_per_node=dim)
+    return KernelIR(**fields, ops=_op_counts(draft), input_hash=_input_hash(ref, rule, law),
+                    bodies=build_bodies(draft))
 
 
 def _shape_gradient_table(ref, rule):
@@ -216,8 +226,9 @@ def _midside_edges(ref):
     return tuple((t.n_corners + m, min(e), max(e)) for m, e in enumerate(t.midside_edges))
 
 
-def _op_counts(ir: KernelIR) -> dict:
-    """Floating-point operations per element, per kernel (sympy's count_ops of the emitted code)."""
+def _op_counts(ir) -> dict:
+    """Floating-point operations per element, per kernel (sympy's count_ops of the emitted code);
+    ir: the IR's fields (before construction)."""
     n, dim, nq = ir.n_nodes, ir.dim, ir.n_points
     law = {k: sum(f.ops for f in v) for k, v in ir.law_code.items()}
     F = 2 * n * dim * dim

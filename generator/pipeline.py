@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from . import GENERATOR_VERSION
-from .backends import BACKENDS, generate as render, get_backend, header_hash
+from ..backends import BACKENDS, get as get_backend
 from .catalogue import Entry
 from .ir import build_ir
 
@@ -52,9 +52,9 @@ def generate_entry(entry: Entry, backends, out: Path, constants: str = "precompu
     for name in sorted(backends):
         backend = get_backend(name)
         path = backend_dir(out, name) / backend.file_name(ir)
-        write_atomic(path, render(ir, name))
+        write_atomic(path, backend.render(ir))
         record["files"][name] = f"{name}/{path.name}"
-        record["inputs"][name] = header_hash(ir, name)
+        record["inputs"][name] = backend.input_hash(ir)
     return record
 
 

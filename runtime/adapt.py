@@ -55,9 +55,7 @@ def _geometry(part):
     k = part.kernel
     if k.recompute:
         raise TensormassError(f"{k}: adaptation criteria need precomputed shape gradients (constants='precompute')")
-    n, stride = part.n_active, 1 + k.n_dofs
-    block = part.D_active[:, :k.n_points * stride].reshape(n, k.n_points, stride)
-    return block[:, :, 0], block[:, :, 1:].reshape(n, k.n_points, k.n_nodes, k.dim)
+    return k.point_volumes(part.D_active), k.point_gradients(part.D_active)   # layout: the kernel's metadata
 
 
 @njit(cache=True)

@@ -1,5 +1,5 @@
 """The user cache of kernels generated or compiled on demand: where it is and whether it can be
-written (used by kernels.py for numba modules and compile.py for C libraries)."""
+written (kernels.py passes it to the backends' loaders: generated files, compiled C libraries)."""
 from __future__ import annotations
 
 import os

@@ -33,13 +33,14 @@ class Kernel(Protocol):
       n_points   integration points
       n_dofs     unknowns per element: n_nodes x dofs per node
       dim        space dimension
-    Constants layout (the model reads the rest measure from it): per integration point q,
-      D[:, q * (1 + n_dofs)] is that point's weight x measure (length x area for a bar,
-      volume for a solid); the sum over the points is the element's rest volume, which
-      sets its lumped mass (density x volume).  The other columns are the kernel's own.
+    The layout of D is the kernel's own; the model reads only point_volumes(D).
     Methods (n elements; u: (n, n_nodes, dofs per node) element dofs, node-major)
       constants(X, **native) -> D (n, n_constants)     X: (n, n_nodes, dim) rest coordinates;
                                                        native: the law's native parameters
+      point_volumes(D) -> (n, n_points)                each point's weight x measure (length x
+                                                       area for a bar, volume for a solid): their
+                                                       sum is the element's rest volume, which sets
+                                                       its mass (density x volume) and gravity
       energy(D, u) -> (n,)
       forces(D, u) -> (n, n_dofs)                      f_int = -dW/du
       stiffness(D, u) -> (n, n_dofs, n_dofs)           K = d2W/du2
@@ -59,6 +60,7 @@ class Kernel(Protocol):
     dim: int
 
     def constants(self, X, **native) -> np.ndarray: ...
+    def point_volumes(self, D) -> np.ndarray: ...
     def energy(self, D, u) -> np.ndarray: ...
     def forces(self, D, u) -> np.ndarray: ...
     def stiffness(self, D, u) -> np.ndarray: ...
@@ -66,7 +68,7 @@ class Kernel(Protocol):
 
 
 REQUIRED_ATTRIBUTES = ("element", "law", "quadrature", "backend", "n_nodes", "n_points", "n_dofs", "dim")
-REQUIRED_METHODS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")
+REQUIRED_METHODS = ("constants", "point_volumes", "energy", "forces", "stiffness", "forces_and_stiffness")
 
 _KERNELS: dict = {}
 

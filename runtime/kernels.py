@@ -10,41 +10,70 @@ first use into the user cache and loaded from there.
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import sys
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from .. import laws
+from .. import backends, generated, laws
 from .cache import cache_dir, writable_cache_dir
-from .compile import c_module, load_c_source
 from .errors import DegenerateElementError, InvertedElementError, KernelNotFoundError, TensormassError
 
-BACKENDS = ("numba", "c")
+BACKENDS = backends.BACKENDS
 
 
 class Kernel:
-    """One element x law x quadrature kernel: constants once, then energy, forces, stiffness."""
+    """One element x law x quadrature kernel: constants once, then energy, forces, stiffness.
+
+    Every attribute comes from the metadata the generated file exports (backends.METADATA_KEYS),
+    the layout of the per-element constants D included: nothing here re-derives it."""
 
     def __init__(self, module, backend: str):
         self.module = module
         self.backend = backend
-        self.element = module.ELEMENT
-        self.law = module.LAW
-        self.quadrature = module.QUADRATURE
-        self.dim = module.DIM
-        self.n_nodes = module.N_NODES
-        self.n_points = module.N_POINTS
-        self.n_constants = module.N_CONSTANTS
-        self.parameters = tuple(module.PARAMETERS)
-        self.ops = dict(module.OPS)
-        self.n_dofs = self.n_nodes * self.dim
+        meta = module.METADATA
+        self.metadata = meta
+        self.name = meta["name"]
+        self.element = meta["element"]
+        self.law = meta["law"]
+        self.quadrature = meta["quadrature"]
+        self.dim = int(meta["dim"])
+        self.n_nodes = int(meta["n_nodes"])
+        self.n_points = int(meta["n_points"])
+        self.n_constants = int(meta["n_constants"])
+        self.parameters = tuple(meta["parameters"])
+        self.ops = dict(meta["ops"])
+        self.n_dofs = int(meta["n_dofs"])
+        self.dofs_per_node = int(meta["dofs_per_node"])
+        # Layout of D: per point q, D[q * point_stride + v_offset] = weight x det J and the shape
+        # gradients G[i][b] (b < dim) at q * point_stride + G_offset + i * dim + b; then the material.
+        self.point_stride = int(meta["point_stride"])
+        self.point_fields = dict(meta["point_fields"])
+        self.v_offset = self.point_fields.get("v")
+        self.G_offset = self.point_fields.get("G")
+        self.material_offset = int(meta["material_offset"])
         # "recompute" kernels (a generator option) keep rest coordinates in D instead of G.
-        self.recompute = bool(getattr(module, "RECOMPUTE", False))
+        self.recompute = bool(meta["recompute"])
+
+    def point_volumes(self, D) -> np.ndarray:
+        """(n_elem, n_points) integration weights x det J, read from the constants."""
+        self._need_points()
+        stop = self.n_points * self.point_stride
+        return np.asarray(D)[:, self.v_offset:stop:self.point_stride]
+
+    def point_gradients(self, D) -> np.ndarray:
+        """(n_elem, n_points, n_nodes, dim) shape gradients G at the points, read from the constants."""
+        self._need_points()
+        D = np.asarray(D)
+        n, s = len(D), self.point_stride
+        block = D[:, :self.n_points * s].reshape(n, self.n_points, s)
+        G = block[:, :, self.G_offset:self.G_offset + self.n_nodes * self.dim]
+        return G.reshape(n, self.n_points, self.n_nodes, self.dim)
+
+    def _need_points(self):
+        if self.recompute:
+            raise TensormassError(f"{self}: needs precomputed shape gradients (constants='precompute')")
 
     def __repr__(self):
         return f"<Kernel {self.element}/{self.law}/{self.quadrature} ({self.backend})>"
@@ -150,7 +179,8 @@ class Kernel:
             if cells.shape != (len(D), self.n_nodes):
                 raise TensormassError(f"{self}: cells must have shape ({len(D)}, {self.n_nodes}), got {cells.shape}")
         out = np.empty(len(D))
-        (_min_det_3d if self.dim == 3 else _min_det_2d)(D, cells, U, self.n_points, 1 + self.n_dofs, out)
+        (_min_det_3d if self.dim == 3 else _min_det_2d)(D, cells, U, self.n_points, self.point_stride,
+                                                        self.G_offset, out)
         return out
 
     def inverted(self, D, u, cells=None) -> np.ndarray:
@@ -158,16 +188,16 @@ class Kernel:
         return ~(self.min_det_F(D, u, cells) > 0.0)
 
 
-# min det F from the stored constants: per point q, D[e, q*stride] is the weight x det J and the
-# shape gradients G_qi follow, node-major; F = I + sum_i u_i (x) G_qi.  numba loops, not numpy:
+# min det F from the stored constants: per point q, the shape gradients G_qi start at
+# D[e, q*stride + g_offset], node-major (the kernel's metadata); F = I + sum_i u_i (x) G_qi.  numba loops, not numpy:
 # implicit steps check every element after every step (laws undefined at det F <= 0, the health
 # monitor), and the einsum version allocated an (n, dim, dim) F per point.
 @njit(cache=True)
-def _min_det_3d(D, cells, U, n_points, stride, out):
+def _min_det_3d(D, cells, U, n_points, stride, g_offset, out):
     for e in range(D.shape[0]):
         low = np.inf
         for q in range(n_points):
-            b = q * stride + 1
+            b = q * stride + g_offset
             f00 = 1.0; f01 = 0.0; f02 = 0.0                       # noqa: E702
             f10 = 0.0; f11 = 1.0; f12 = 0.0                       # noqa: E702
             f20 = 0.0; f21 = 0.0; f22 = 1.0                       # noqa: E702
@@ -186,11 +216,11 @@ def _min_det_3d(D, cells, U, n_points, stride, out):
 
 
 @njit(cache=True)
-def _min_det_2d(D, cells, U, n_points, stride, out):
+def _min_det_2d(D, cells, U, n_points, stride, g_offset, out):
     for e in range(D.shape[0]):
         low = np.inf
         for q in range(n_points):
-            b = q * stride + 1
+            b = q * stride + g_offset
             f00 = 1.0; f01 = 0.0; f10 = 0.0; f11 = 1.0          # noqa: E702
             for i in range(cells.shape[1]):
                 n = cells[e, i]
@@ -203,40 +233,62 @@ def _min_det_2d(D, cells, U, n_points, stride, out):
         out[e] = low
 
 
+def backend_of(name: str):
+    """The registered backend called name (TensormassError naming the known ones otherwise)."""
+    try:
+        return backends.get(name)
+    except backends.BackendError as error:
+        raise TensormassError(str(error)) from None
+
+
 @lru_cache(maxsize=None)
 def load_kernel(element: str, law: str, quadrature: str, backend: str = "numba") -> Kernel:
     """The kernel for (element, law, quadrature): committed, cached, or generated now."""
-    if backend not in BACKENDS:
-        raise TensormassError(f"unknown backend {backend!r}; known backends: {', '.join(BACKENDS)}")
+    target = backend_of(backend)
+    name = f"{element}_{law}_{quadrature}"
+    return _load(target, kernel_source(element, law, quadrature, backend), name)
+
+
+def kernel_source(element: str, law: str, quadrature: str, backend: str) -> Path:
+    """The generated file of a catalogue entry: the committed one, else one in the user cache,
+    generated now when missing or made by other templates (a stale one is regenerated)."""
+    target = backend_of(backend)
+    name = f"{element}_{law}_{quadrature}"
+    committed = Path(generated.__file__).resolve().parent / backend / target.file_name(name)
+    if committed.exists():
+        return committed
+    # Deferred: the catalogue and the generator import the symbolic pipeline (jinja2, sympy's
+    # printers and cse); a run whose kernels are all committed never needs them.
     from ..generator.catalogue import Entry, entries
+    from ..generator.pipeline import generate_all
     entries([element], [law], [quadrature])      # validates the names with clear messages
-    name = Entry(element, law, quadrature).name
-    if backend == "numba":
-        return Kernel(_numba_module(name, Entry(element, law, quadrature)), "numba")
-    return Kernel(c_module(Entry(element, law, quadrature)), "c")
+    cached = cache_dir() / backend / target.file_name(name)
+    if not (cached.exists() and _fresh(cached, target)):
+        writable_cache_dir(cached.parent, f"generating kernel {name} (not in the committed catalogue)")
+        generate_all([Entry(element, law, quadrature)], [backend], cache_dir(), progress=None)
+    if not cached.exists():
+        raise KernelNotFoundError(f"could not generate kernel {name} ({backend})")
+    return cached
 
 
-def _numba_module(name: str, entry):
+def _fresh(path: Path, target) -> bool:
+    """A cached file made by the current templates of its backend (an older one is regenerated)."""
     try:
-        return importlib.import_module(f"tensormass.generated.numba.{name}")
-    except ModuleNotFoundError:
-        pass
-    path = cache_dir() / "numba" / f"{name}.py"
-    if not path.exists():
-        from ..generator.pipeline import generate_all
-        writable_cache_dir(path.parent, f"generating kernel {name} (not in the committed catalogue)")
-        generate_all([entry], ["numba"], cache_dir(), progress=None)
-    if not path.exists():
-        raise KernelNotFoundError(f"could not generate kernel {name}")
-    return _import_path(path, f"tensormass_cache_{name}")
+        meta = target.read_metadata(path)
+    except backends.BackendError:
+        return False
+    return meta.get("templates") == target.templates_hash()[:16]
 
 
-def _import_path(path: Path, module_name: str):
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[module_name] = module
-    spec.loader.exec_module(module)
-    return module
+def _load(target, path: Path, name: str) -> Kernel:
+    """Load through the backend; its errors become TensormassError with the same message."""
+    try:
+        module = target.load(path, cache_dir(), writable=writable_cache_dir)
+    except backends.BackendError as error:
+        raise TensormassError(str(error)) from None
+    if module.METADATA["name"] != name:
+        raise TensormassError(f"{path}: holds kernel {module.METADATA['name']!r}, expected {name!r}")
+    return Kernel(module, target.name)
 
 
 @lru_cache(maxsize=None)
@@ -244,17 +296,14 @@ def load_recompute_kernel(element: str, law: str, quadrature: str, backend: str 
     """The generator's constants="recompute" variant (D holds rest coordinates, the geometry is
     recomputed every call), generated into the cache on first use. Used by the kernel benchmark
     to compare memory traffic against arithmetic; not part of the committed catalogue."""
-    from ..generator.backends import generate
+    # Deferred: benchmark-only, and the generator imports sympy and jinja2.
     from ..generator.ir import build_ir
     from ..generator.pipeline import write_atomic
-    if backend not in BACKENDS:
-        raise TensormassError(f"unknown backend {backend!r}; known backends: {', '.join(BACKENDS)}")
+    target = backend_of(backend)
     ir = build_ir(element, law, quadrature, constants="recompute")
-    path = cache_dir() / "recompute" / backend / (ir.name + (".py" if backend == "numba" else ".c"))
-    text = generate(ir, backend)
+    path = cache_dir() / "recompute" / backend / target.file_name(ir)
+    text = target.render(ir)
     if not path.exists() or path.read_text(encoding="utf-8") != text:
         writable_cache_dir(path.parent, f"the recompute variant of {ir.name}")
         write_atomic(path, text)
-    if backend == "numba":
-        return Kernel(_import_path(path, f"tensormass_recompute_{ir.name}"), "numba")
-    return Kernel(load_c_source(path, ir.name), "c")
+    return _load(target, path, ir.name)

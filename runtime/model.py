@@ -241,8 +241,7 @@ class Model:
                     kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
                 self._check_kernel_dofs(kernel, element, cells)
                 D = self._constants(kernel, cells, cell_ids, self._parameters(name, members))
-                stride = 1 + kernel.n_dofs
-                volume = D[:, 0:kernel.n_points * stride:stride].sum(axis=1)
+                volume = kernel.point_volumes(D).sum(axis=1)       # the layout from the kernel's metadata
                 active = np.full(len(cells), k == 0)
                 parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active))
             if len(reach) > 1:

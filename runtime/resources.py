@@ -334,7 +334,9 @@ def _uncatalogued_entry(element) -> dict:
     """A rough entry for an element type with no kernel in the catalogue (added to elements/,
     generated on first use): one integration point per node, the constants layout the
     generator uses (per point: weight x det J, then a shape gradient per node), and op counts
-    scaled like the catalogue's (f+K ~ 4 nd^2 per point, forces ~ 20 nd, energy ~ 60)."""
+    scaled like the catalogue's (f+K ~ 4 nd^2 per point, forces ~ 20 nd, energy ~ 60).
+    The layout is assumed here, not read from kernel metadata: this estimate is made before
+    the kernel exists (no generated file to read yet); loaded kernels use their metadata."""
     el = _elements.get(element)
     points, nd = el.n_nodes, el.n_dofs(max(el.space_dims))
     per_point = {"energy": 60, "forces": 20 * nd, "stiffness": 4 * nd * nd, "forces_and_stiffness": 4 * nd * nd}

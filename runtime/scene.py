@@ -78,6 +78,7 @@ from pathlib import Path
 
 from .. import elements as _element_types
 from .. import laws
+from ..backends import BACKENDS
 from ..generator.catalogue import entries
 from .errors import SceneError
 from .mesh import BAR_ELEMENTS, COORD_MAX
@@ -343,7 +344,6 @@ _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days
 LINEAR_SOLVERS = ("auto", "direct", "cg")
 INVERSION_ACTIONS = ("warn", "stop")
 MASS_KINDS = ("lumped", "consistent")       # runtime/mass.py
-BACKENDS = ("numba", "c")
 GENERATORS = ("bar",)
 ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
 ELEMENTS_2D = BAR_ELEMENTS[2]

@@ -1302,7 +1302,7 @@ def _interrupt_cases() -> None:
         hooks=(("interrupt_at", "tensormass.runtime.output:write_json_atomic", 1),))
     add("interrupt", "Ctrl-C while compiling a C kernel", "interrupted", ctrl_c, changes=C_SCENE,
         env=(("TENSORMASS_CACHE", "{tmp}/cache"),), clear_kernels=True,
-        hooks=(("interrupt_at", "tensormass.runtime.compile:_run_measured", 1),))
+        hooks=(("interrupt_at", "tensormass.backends.c.loader:_run_measured", 1),))
 
 
 # -------------------------------------------------------------------------- cache family

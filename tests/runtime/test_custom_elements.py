@@ -53,6 +53,10 @@ class _Spring:
         D[:, 2 + self.dim] = young / (2 * (1 + NU)) * 2 * self.area ** 2 / (4 * np.pi) / length  # G J / L (circle)
         return D
 
+    def point_volumes(self, D):
+        """(n, 1) weight x measure of the one point: the bar's volume (the model's lumped mass)."""
+        return D[:, :1]
+
     def stiffness(self, D, u):
         self.calls += 1
         return self._K(np.asarray(D))

@@ -1,11 +1,11 @@
 """Compile generated C kernels into shared libraries and call them through cffi (ABI mode).
 
-    module = c_module(entry)          # entry: .element .law .quadrature .name
+    module = load_source(path, cache)     # path: a generated .c file; cache: a folder
     module.forces_and_stiffness(D, u, f, K, flags)
 
-The source is the committed ``generated/c/<name>.c`` or, when the catalogue
-has none, a file generated on demand into the user cache. Libraries live in
-``cache_dir()/c/<name>-<hash>.so`` where the hash covers the source, the
+The runtime chooses the source (the committed ``generated/c/<name>.c`` or a file
+generated on demand) and the cache folder. Libraries live in
+``<cache>/c/<name>-<hash>.so`` where the hash covers the source, the
 flags, the compiler and the CPU (``-march=native``); each has a sidecar
 ``<so>.sha256`` that is checked before loading, so a truncated or corrupted
 library is rebuilt instead of crashing the process. Builds go to a temporary
@@ -30,8 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import cache_dir, writable_cache_dir
-from .errors import KernelNotFoundError, TensormassError
+from ..protocol import KERNEL_FUNCTIONS, BackendError, check_metadata
 
 CFLAGS = ("-O3", "-march=native", "-fPIC", "-shared", "-std=c99", "-fno-math-errno")
 LIBS = ("-lm",)
@@ -55,7 +54,7 @@ def compiler() -> list[str]:
         if path:
             return [path] + words[1:]
     what = f"$CC={cc!r}" if cc else ", ".join(tried)
-    raise TensormassError(
+    raise BackendError(
         f"no C compiler was found (tried {what}): install gcc (e.g. `apt-get install gcc`) "
         f"or set $CC, or use backend=\"numba\"")
 
@@ -74,7 +73,7 @@ def _compiler_version(command: tuple) -> str:
     try:
         done = subprocess.run(list(command) + ["--version"], capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.SubprocessError) as error:
-        raise TensormassError(f"C compiler {' '.join(command)!r} does not run: {error}") from None
+        raise BackendError(f"C compiler {' '.join(command)!r} does not run: {error}") from None
     return done.stdout + done.stderr
 
 
@@ -95,31 +94,15 @@ def _cpu_signature() -> str:
     return "\n".join(parts)
 
 
-# -- source -----------------------------------------------------------------------------------
-def source_path(entry) -> Path:
-    """The committed C file of the entry, else one generated on demand into the cache."""
-    from .. import generated
-    committed = Path(generated.__file__).resolve().parent / "c" / f"{entry.name}.c"
-    if committed.exists():
-        return committed
-    cached = cache_dir() / "c" / f"{entry.name}.c"
-    if not (cached.exists() and _fresh(cached)):
-        from ..generator.pipeline import generate_all
-        writable_cache_dir(cached.parent, f"generating C kernel {entry.name}")
-        generate_all([entry], ["c"], cache_dir(), progress=None)
-    if not cached.exists():
-        raise KernelNotFoundError(f"could not generate C kernel {entry.name}")
-    return cached
-
-
-def _fresh(path: Path) -> bool:
-    """A cached source made by the current C templates (an older one is regenerated)."""
-    from ..generator.backends import templates_hash
+# -- metadata ---------------------------------------------------------------------------------
+def read_metadata(path: Path) -> dict:
+    """The metadata comment of a generated C file."""
     try:
-        meta = parse_metadata(path.read_text(encoding="utf-8"), path)
-    except (OSError, TensormassError):
-        return False
-    return meta.get("templates") == templates_hash("c")[:16]
+        with open(path, encoding="utf-8") as handle:
+            head = "".join(handle.readline() for _ in range(10))
+    except (OSError, UnicodeDecodeError) as error:
+        raise BackendError(f"{path}: cannot read the kernel metadata ({error})") from None
+    return parse_metadata(head, path)
 
 
 def parse_metadata(source: str, where="source") -> dict:
@@ -129,19 +112,20 @@ def parse_metadata(source: str, where="source") -> dict:
         if start >= 0:
             text = line[start + len(METADATA_TAG):].rsplit("*/", 1)[0]
             try:
-                return json.loads(text)
+                meta = json.loads(text)
             except ValueError:
                 break
-    raise TensormassError(f"{where}: no valid '{METADATA_TAG}' comment (not a tensormass C kernel?)")
+            return check_metadata(meta, where)
+    raise BackendError(f"{where}: no valid '{METADATA_TAG}' comment (not a tensormass C kernel?)")
 
 
 # -- building ---------------------------------------------------------------------------------
-def library_path(name: str, source: str, command: list[str], flags: list[str]) -> Path:
+def library_path(name: str, source: str, command: list[str], flags: list[str], cache: Path) -> Path:
     h = hashlib.sha256()
     for part in (source, "\0".join(flags), "\0".join(command), _compiler_version(tuple(command)), _cpu_signature()):
         h.update(part.encode())
         h.update(b"\0\0")
-    return cache_dir() / "c" / f"{name}-{h.hexdigest()[:16]}.so"
+    return Path(cache) / "c" / f"{name}-{h.hexdigest()[:16]}.so"
 
 
 def _file_hash(path: Path) -> str:
@@ -227,9 +211,14 @@ def _kill_group(proc) -> None:
     proc.wait()
 
 
-def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str]) -> dict:
-    """Compile source into lib (atomically, with its sidecar hash); returns the compile record."""
-    writable_cache_dir(lib.parent, f"compiling C kernel {name}")
+def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str], writable=None) -> dict:
+    """Compile source into lib (atomically, with its sidecar hash); returns the compile record.
+    writable(folder, needed_for), when given, checks the folder first (the runtime's clear
+    error for a read-only cache); else the folder is created."""
+    if writable is not None:
+        writable(lib.parent, f"compiling C kernel {name}")
+    else:
+        lib.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}.", suffix=".so.tmp")
     os.close(fd)
     try:
@@ -237,7 +226,7 @@ def build(name: str, source: Path, lib: Path, command: list[str], flags: list[st
         code, output, seconds, maxrss = _run_measured(cmd)
         if code != 0:
             tail = "\n".join(output.strip().splitlines()[-30:])
-            raise TensormassError(f"compiling C kernel {name} failed (exit code {code}):\n"
+            raise BackendError(f"compiling C kernel {name} failed (exit code {code}):\n"
                                   f"  {shlex.join(cmd)}\n{tail}")
         digest = _file_hash(Path(tmp))
         os.chmod(tmp, 0o755)
@@ -267,37 +256,28 @@ class CModule:
     def __init__(self, meta: dict, ffi, lib, library: Path, source: Path, compiled: dict | None):
         self._ffi, self._lib = ffi, lib
         prefix = meta["name"]
-        self._functions = {kind: getattr(lib, f"{prefix}_{kind}")
-                           for kind in ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")}
+        self._functions = {kind: getattr(lib, f"{prefix}_{kind}") for kind in KERNEL_FUNCTIONS}
+        self.METADATA = meta
         self.NAME = meta["name"]
-        self.ELEMENT = meta["element"]
-        self.LAW = meta["law"]
-        self.QUADRATURE = meta["quadrature"]
-        self.DIM = int(meta["dim"])
-        self.N_NODES = int(meta["n_nodes"])
-        self.N_POINTS = int(meta["n_points"])
-        self.N_CONSTANTS = int(meta["n_constants"])
-        self.PARAMETERS = tuple(meta["parameters"])
-        self.REQUIRES_POSITIVE_J = bool(meta["requires_positive_J"])
-        self.RECOMPUTE = bool(meta.get("recompute", False))
-        self.OPS = dict(meta["ops"])
         self.LIBRARY = library
         self.SOURCE = source
         self.COMPILED = compiled is not None
         self.COMPILE_SECONDS = compiled["seconds"] if compiled else 0.0
         self.COMPILE_MAXRSS_MB = compiled["maxrss_mb"] if compiled else 0.0
-        self._n_dofs = self.N_NODES * self.DIM
+        self._n_dofs = int(meta["n_dofs"])
+        self._n_constants = int(meta["n_constants"])
+        self._n_parameters = len(meta["parameters"])
 
     def __repr__(self):
         return f"<C kernel {self.NAME} from {self.LIBRARY}>"
 
     def _pointer(self, array, ctype: str, dtype, per_element: int, n: int, what: str, writable: bool):
         if not isinstance(array, np.ndarray) or array.dtype != dtype or not array.flags.c_contiguous:
-            raise TensormassError(f"{self.NAME}: {what} must be a C-contiguous {np.dtype(dtype).name} numpy array")
+            raise BackendError(f"{self.NAME}: {what} must be a C-contiguous {np.dtype(dtype).name} numpy array")
         if array.size != n * per_element:
-            raise TensormassError(f"{self.NAME}: {what} has {array.size} values, expected {n} x {per_element}")
+            raise BackendError(f"{self.NAME}: {what} has {array.size} values, expected {n} x {per_element}")
         if writable and not array.flags.writeable:
-            raise TensormassError(f"{self.NAME}: {what} is read-only")
+            raise BackendError(f"{self.NAME}: {what} is read-only")
         return self._ffi.from_buffer(f"{ctype}[]", array, require_writable=writable)
 
     def _double(self, array, per_element, n, what, writable=False):
@@ -309,31 +289,31 @@ class CModule:
     def constants(self, X, params, D, flags):
         n = len(X)
         self._functions["constants"](
-            n, self._double(X, self._n_dofs, n, "X"), self._double(params, len(self.PARAMETERS), n, "params"),
-            self._double(D, self.N_CONSTANTS, n, "D", True), self._flags(flags, n))
+            n, self._double(X, self._n_dofs, n, "X"), self._double(params, self._n_parameters, n, "params"),
+            self._double(D, self._n_constants, n, "D", True), self._flags(flags, n))
 
     def energy(self, D, u, out, flags):
         n = len(D)
         self._functions["energy"](
-            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
             self._double(out, 1, n, "out", True), self._flags(flags, n))
 
     def forces(self, D, u, f, flags):
         n = len(D)
         self._functions["forces"](
-            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
             self._double(f, self._n_dofs, n, "f", True), self._flags(flags, n))
 
     def stiffness(self, D, u, K, flags):
         n = len(D)
         self._functions["stiffness"](
-            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
             self._double(K, self._n_dofs ** 2, n, "K", True), self._flags(flags, n))
 
     def forces_and_stiffness(self, D, u, f, K, flags):
         n = len(D)
         self._functions["forces_and_stiffness"](
-            n, self._double(D, self.N_CONSTANTS, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
             self._double(f, self._n_dofs, n, "f", True), self._double(K, self._n_dofs ** 2, n, "K", True),
             self._flags(flags, n))
 
@@ -346,13 +326,8 @@ def _open(meta: dict, lib: Path, source: Path, compiled):
     return CModule(meta, ffi, handle, lib, source, compiled)
 
 
-def c_module(entry) -> CModule:
-    """The compiled C kernel of a catalogue entry: from the cache when valid, else compiled now."""
-    return load_c_source(source_path(entry), entry.name)
-
-
-def load_c_source(source: Path, expected_name: str | None = None) -> CModule:
-    """Compile (or take from the cache) and load one generated C file."""
+def load_source(source: Path, cache: Path, expected_name: str | None = None, writable=None) -> CModule:
+    """Compile (or take from <cache>/c) and load one generated C file."""
     command = compiler()
     flags = cflags()
     source = Path(source)
@@ -360,22 +335,22 @@ def load_c_source(source: Path, expected_name: str | None = None) -> CModule:
     meta = parse_metadata(text, source)
     name = meta.get("name")
     if expected_name is not None and name != expected_name:
-        raise TensormassError(f"{source}: holds kernel {name!r}, expected {expected_name!r}")
-    lib = library_path(name, text, command, flags)
+        raise BackendError(f"{source}: holds kernel {name!r}, expected {expected_name!r}")
+    lib = library_path(name, text, command, flags, cache)
     with _lock:
         module = _loaded.get(str(lib))
         if module is not None and _verified(lib):
             return module
         compiled = None
         if not _verified(lib):
-            compiled = build(name, source, lib, command, flags)
+            compiled = build(name, source, lib, command, flags, writable)
         try:
             module = _open(meta, lib, source, compiled)
         except (OSError, AttributeError):
             if compiled is not None:
                 raise
             # The hash matched but the library does not load (or lacks a symbol): build it again.
-            compiled = build(name, source, lib, command, flags)
+            compiled = build(name, source, lib, command, flags, writable)
             module = _open(meta, lib, source, compiled)
         _loaded[str(lib)] = module
         return module

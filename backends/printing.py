@@ -1,4 +1,4 @@
-"""Shared printing rules: floats at full precision, small integer powers as products."""
+"""Shared printing rules of the backends: floats at full precision, small integer powers as products."""
 from __future__ import annotations
 
 import sympy as sp

@@ -1,0 +1,29 @@
+"""C backend: one C99 file per kernel (plain loops, and 4 elements per instruction for
+forces_and_stiffness), compiled into a shared library and called through cffi."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..protocol import Backend
+from . import loader
+
+
+class CBackend(Backend):
+    name = "c"
+    suffix = ".c"
+    folder = Path(__file__).resolve().parent
+
+    def render(self, ir) -> str:
+        # Deferred: the printer needs sympy and jinja2, which loading a committed kernel must
+        # not import (`tensormass run` start-up time).
+        from .printer import render
+        return render(ir, self)
+
+    def read_metadata(self, path: Path) -> dict:
+        return loader.read_metadata(path)
+
+    def load(self, path: Path, cache: Path, writable=None):
+        return loader.load_source(path, cache, writable=writable)
+
+
+BACKEND = CBackend()
