@@ -13,15 +13,6 @@ class CBackend(Backend):
     suffix = ".c"
     folder = Path(__file__).resolve().parent
 
-    def render(self, ir) -> str:
-        # Deferred: the printer needs sympy and jinja2, which loading a committed kernel must
-        # not import (`tensormass run` start-up time).
-        from .printer import render
-        return render(ir, self)
-
-    def read_metadata(self, path: Path) -> dict:
-        return loader.read_metadata(path)
-
     def load(self, path: Path, cache: Path, writable=None):
         return loader.load_source(path, cache, writable=writable)
 

@@ -12,15 +12,6 @@ class NumbaBackend(Backend):
     suffix = ".py"
     folder = Path(__file__).resolve().parent
 
-    def render(self, ir) -> str:
-        # Deferred: the printer needs sympy and jinja2, which loading a committed kernel must
-        # not import (`tensormass run` start-up time).
-        from .printer import render
-        return render(ir, self)
-
-    def read_metadata(self, path: Path) -> dict:
-        return loader.read_metadata(path)
-
     def load(self, path: Path, cache: Path, writable=None):
         return loader.load_module(path)
 
