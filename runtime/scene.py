@@ -185,7 +185,7 @@ class Solver:
 @dataclass
 class Probe:
     name: str
-    point: tuple | None                   # the nearest node's displacement; or:
+    point: tuple | None                   # u interpolated at the point (runtime.probes); or:
     region: str | int | None = None       # the mean displacement of a group's nodes (with box: those inside)
     box: tuple | None = None              # ... or of the nodes inside a box
 
@@ -756,7 +756,7 @@ class _Parser:
                              "displacement of their nodes)")
         if "point" in t and ("region" in t or "box" in t):
             extra = "region" if "region" in t else "box"
-            raise SceneError(f"{key}.{extra}: give either point (the nearest node) or region/box (the mean over "
+            raise SceneError(f"{key}.{extra}: give either point (u interpolated there) or region/box (the mean over "
                              "their nodes), not both")
         name = self.string(t.get("name", f"probe{index}"), f"{key}.name")
         if not name:
