@@ -496,7 +496,10 @@ def test_ctrl_c_during_a_run(tmp_path):
     out, js = tmp_path / "out", tmp_path / "s.json"
     proc = subprocess.Popen([sys.executable, "-m", "tensormass.apps.cli", "run", str(scene), "--out", str(out),
                              "--json", str(js), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=tmp_path)
+                            text=True, cwd=tmp_path,
+                            # a terminal's Ctrl-C: SIGINT at its default in the child, whatever the test
+                            # runner inherited (a runner started in the background ignores SIGINT)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not (out / "frame_000002.vtu").exists():
