@@ -24,6 +24,7 @@ import numpy as np
 from .. import elements as _types
 from .. import generated as _generated
 from .errors import TensormassError
+from .regions import region_faces
 
 __all__ = ["ShapeTable", "shape_table", "body_force", "volume_shares", "traction", "face_shares",
            "face_jacobians", "normal_areas", "boundary_faces_by_type", "faces_in_box"]
@@ -169,32 +170,13 @@ def normal_areas(x: np.ndarray, table: ShapeTable) -> np.ndarray:
 
 
 def boundary_faces_by_type(mesh) -> dict:
-    """{face type: (n, k) node ids} of the faces used by exactly one cell, outward, face-type order."""
-    from .mesh import _boundary_rows, _face_table          # the mesh's own face bookkeeping
-    out: dict = {}
-    if mesh.n_cells == 0:
-        return out
-    ft = _face_table(mesh)
-    rows = _boundary_rows(ft)
-    for b, lf in sorted(set(zip(ft.block[rows].tolist(), ft.lface[rows].tolist()))):
-        sel = rows[(ft.block[rows] == b) & (ft.lface[rows] == lf)]
-        blk = mesh.blocks[b]
-        face = _types.get(blk.type).faces[lf]
-        out.setdefault(face.type, []).append(blk.cells[ft.local[sel]][:, list(face.nodes)])
-    return {k: np.vstack(v) for k, v in sorted(out.items())}
+    """{face type: (n, k) node ids} of the body's boundary faces, outward (runtime.regions.region_faces)."""
+    return region_faces(mesh)
 
 
-def faces_in_box(mesh, box, tol: float, faces: dict | None = None) -> dict:
-    """The boundary faces (or the given faces) whose nodes all lie inside the box; empty types dropped."""
-    from .regions import box_contains
-    inside = box_contains(box, mesh.points, tol)
-    faces = boundary_faces_by_type(mesh) if faces is None else faces
-    out = {}
-    for name, f in faces.items():
-        keep = f[inside[f].all(axis=1)]
-        if len(keep):
-            out[name] = keep
-    return out
+def faces_in_box(mesh, box, tol: float) -> dict:
+    """The boundary faces whose nodes all lie in the box (closed, +- tol): runtime.regions.region_faces."""
+    return region_faces(mesh, box=box, tol=tol)
 
 
 def n_faces(faces: dict) -> int:

@@ -354,9 +354,7 @@ class Model:
 
     def _faces_in(self, box) -> dict:
         """{face type: (n, k)} boundary faces whose nodes all lie inside the box (runtime.loads)."""
-        if getattr(self, "_boundary_faces", None) is None:
-            self._boundary_faces = _loads.boundary_faces_by_type(self.mesh)
-        return _loads.faces_in_box(self.mesh, box, self.box_tol, self._boundary_faces)
+        return region_faces(self.mesh, box=box, tol=self.box_tol)      # boundary cached on the mesh
 
     def _pressure_loads(self):
         """Follower pressures ([[loads.pressure]]) on the boundary faces in their boxes, or None."""

@@ -218,7 +218,7 @@ def region_faces(mesh, region=None, box=None, key: str = "region", tol: float | 
     if box is not None and pick.size:
         tol = box_tolerance(mesh.points) if tol is None else tol
         inside = box_contains(box, mesh.points, tol)
-        pick = pick[[bool(inside[nodes[i]].all()) for i in pick]]
+        pick = pick[np.fromiter((inside[nodes[i]].all() for i in pick), bool, pick.size)]
     out: dict = {}
     for i in pick:
         out.setdefault(types[i], []).append(nodes[i])

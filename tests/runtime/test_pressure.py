@@ -16,7 +16,7 @@ from tensormass.runtime.simulation import Simulation
 
 def _faces(mesh, box=None):
     faces = loads.boundary_faces_by_type(mesh)
-    return faces if box is None else loads.faces_in_box(mesh, box, 1e-9, faces)
+    return faces if box is None else loads.faces_in_box(mesh, box, 1e-9)
 
 
 def _dense(P, u):
