@@ -38,8 +38,8 @@ LINEAR = ("direct", "cg")
 NEWTON_CASE = ("hexahedron_3k", "hexahedron", (48, 8, 8), (1.2, 0.2, 0.2), "neohookean")
 QUICK_NEWTON_CASE = ("hexahedron_96", "hexahedron", (12, 2, 4), (1.2, 0.2, 0.2), "neohookean")
 # LinearSolver settings timed on it: (label, method, preconditioner)
-NEWTON_SOLVERS = (("auto", "auto", "ic"), ("band", "band", "ic"), ("lu", "lu", "ic"),
-                  ("cg-ic", "cg", "ic"), ("cg-jacobi", "cg", "jacobi"), ("cholmod", "cholmod", "ic"))
+NEWTON_SOLVERS = (("auto", "auto", "ic"), ("band", "band", "ic"), ("pardiso", "pardiso", "ic"), ("lu", "lu", "ic"),
+                  ("cg-ic", "cg", "ic"), ("cg-jacobi", "cg", "jacobi"), ("cg-amg", "amg", "ic"))
 NEWTON_REPEATS, QUICK_NEWTON_REPEATS = 5, 2
 FELUPE_REPEATS, QUICK_FELUPE_REPEATS = 3, 1
 
@@ -139,7 +139,7 @@ def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=
     # deferred: model, integrators and solvers cost ~0.2 s at every CLI start
     from ..runtime.integrators import Context
     from ..runtime.model import Model
-    from ..runtime.solvers import LinearSolver, has_cholmod
+    from ..runtime.solvers import LinearSolver, has_pardiso
     by_backend = {}
     for other in BACKENDS:
         if other == backend:
@@ -167,7 +167,7 @@ def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=
            "backend": backend, "assembly_s": assembly, "assembly_s_by_backend": by_backend, "solvers": {}}
     ref = None
     for label, method, preconditioner in solvers:
-        if method == "cholmod" and not has_cholmod():
+        if method == "pardiso" and not has_pardiso():
             continue
         # reuse=False: every repeat factors afresh (a kept factor would solve the same matrix at once)
         solver = LinearSolver(method, s.cg_tolerance, s.cg_max_iterations, preconditioner, reuse=False)

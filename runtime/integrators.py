@@ -21,6 +21,7 @@ from .. import laws
 from .assembly import Assembler
 from .errors import InvertedElementError, TensormassError
 from .health import safe_norm
+from .amg import rigid_body_modes
 from .solvers import ConstrainedSystem, LinearSolver
 
 __all__ = ["Context", "make_integrator", "integrator_class", "outputs_for", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
@@ -43,7 +44,8 @@ class Context:
         self.model = model
         s = model.solver
         self.asm = assembler if assembler is not None else Assembler(model)
-        self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs)
+        modes = rigid_body_modes(model.mesh.points, np.arange(model.n_dofs), model.dofs_per_node)
+        self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs, modes)
         self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
         if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
             # follower pressure on an open surface: non-symmetric Newton matrices (runtime/pressure.py)

@@ -376,7 +376,7 @@ class Model:
             return None
         pressure = FollowerPressure(self.mesh.points, loads, self.dim)
         # open surfaces: the full (non-symmetric) stiffness unless CG (symmetric only) solves
-        pressure.symmetric = pressure.closed or self.solver.linear == "cg"
+        pressure.symmetric = pressure.closed or self.solver.linear in ("cg", "amg")
         return pressure
 
     def _add_region_load(self, f, load, value, i):

@@ -58,6 +58,7 @@ import numpy as np
 
 from .. import elements as _elements
 from .. import generated
+from . import pardiso as _pardiso
 from .errors import TensormassError
 from .mesh import bar_counts
 from .regions import may_cover, reachable_laws
@@ -122,7 +123,15 @@ REFINE_CELLS, REFINE_NODES = 2.0, 2.5
 # The solver's choices (runtime/solvers.py; not imported: it loads numba, and a scene is
 # refused before that; a test checks these agree).
 AUTO_DIRECT_BELOW = 3_000
-DIRECT_LIMIT = 200_000
+DIRECT_LIMIT = 2_000_000
+PARDISO_ANALYSE_ABOVE = 0.05
+PARDISO_FLOPS = 30e9
+# PARDISO (nested dissection) on 3D bodies, measured (solvers.py's table): factor entries
+# ~12-18 x n^(4/3), factor flops ~1.5e-8 x n^2, ~12 bytes per factor entry (the float32
+# factor plus a float64 one when float32 does not converge).
+PARDISO_FILL = 18.0
+PARDISO_FLOPS_PER_N2 = 1.5e-8
+PARDISO_BYTES = 12
 AUTO_BAND_WORK_PER_NNZ = 6_000.0
 BAND_MAX_ENTRIES = 2 ** 28
 # Time: kernels 0.3-1.1 ns per manifest operation (measured), scatter ~3 ns per entry, the
@@ -483,13 +492,17 @@ class _Estimator:
         self.linear = self._linear()
 
     def _linear(self) -> str:
-        """What the linear solver will do: "none", "band" or "cg" (solvers.LinearSolver.choose)."""
+        """What the linear solver will do: "none", "band", "pardiso" or "cg" (solvers.LinearSolver.choose)."""
         if self.kind == "explicit":
             return "none"
         n, method = self.dofs, self.solver.linear
         band_entries = n * (self.kd + 1)
-        if method == "cg":
+        if method in ("cg", "amg"):
             return "cg"
+        if method in ("auto", "direct", "pardiso") and n > AUTO_DIRECT_BELOW and _pardiso.available():
+            if method == "pardiso" or self._band_seconds() > min(PARDISO_ANALYSE_ABOVE, self._pardiso_seconds()):
+                return "pardiso"
+            return "band"
         if method == "auto" and n > AUTO_DIRECT_BELOW:
             if n > DIRECT_LIMIT or band_entries > BAND_MAX_ENTRIES \
                     or n * float(self.kd) ** 2 > AUTO_BAND_WORK_PER_NNZ * self.nnz:
@@ -498,7 +511,15 @@ class _Estimator:
         # below the band's fill, so the band is the conservative figure there too
         return "band"
 
+    def _band_seconds(self) -> float:
+        return BAND_SECONDS * self.dofs * float(self.kd) ** 2
+
+    def _pardiso_seconds(self) -> float:
+        return PARDISO_FLOPS_PER_N2 * float(self.dofs) ** 2 / PARDISO_FLOPS
+
     def _factor(self) -> int:
+        if self.linear == "pardiso":
+            return int(PARDISO_BYTES * PARDISO_FILL * float(self.dofs) ** (4.0 / 3.0))
         if self.linear == "band":
             return BAND_BYTES * self.dofs * (self.kd + 1)
         return IC_BYTES * self.nnz if self.linear == "cg" else 0
@@ -538,7 +559,9 @@ class _Estimator:
         if self.kind == "explicit":
             return kernel + SECONDS_PER_ENTRY * self.cell_ints * self.dpn
         if self.linear == "band":
-            solve = BAND_SECONDS * self.dofs * float(self.kd) ** 2
+            solve = self._band_seconds()
+        elif self.linear == "pardiso":
+            solve = self._pardiso_seconds()
         else:
             iterations = self.solver.cg_max_iterations if self.kind == "static" else CG_DYNAMIC_ITERATIONS
             solve = CG_SECONDS * self.nnz * min(iterations, self.solver.cg_max_iterations)

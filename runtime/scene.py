@@ -165,7 +165,7 @@ class Solver:
     kind: str = "static"                  # static | implicit_euler | backward_euler | explicit | generalized_alpha
     dt: float = 0.01
     steps: int = 1                        # time steps (dynamic) or load steps (static)
-    linear: str = "auto"                  # auto | direct | cg
+    linear: str = "auto"                  # auto | direct | cg | amg | band | pardiso | lu (runtime/solvers.py)
     cg_tolerance: float = 1e-8
     cg_max_iterations: int = 1000
     newton_tolerance: float = 1e-8        # relative residual
@@ -341,7 +341,8 @@ SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit", "gener
 # before the run rather than discovered hours into it.
 MAX_STEPS = 100_000_000
 _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days on a real mesh"
-LINEAR_SOLVERS = ("auto", "direct", "cg")
+# runtime.solvers.METHODS (not imported here: it loads numba; a test checks they agree)
+LINEAR_SOLVERS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 INVERSION_ACTIONS = ("warn", "stop")
 MASS_KINDS = ("lumped", "consistent")       # runtime/mass.py
 GENERATORS = ("bar",)

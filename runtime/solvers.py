@@ -1,28 +1,35 @@
-"""Linear solvers for the free dofs: banded Cholesky, CHOLMOD, SuperLU and preconditioned CG.
+"""Linear solvers for the free dofs: PARDISO, banded Cholesky, SuperLU, and CG (IC(0) or multigrid).
 
     solver = LinearSolver("auto", tol=1e-8, max_iterations=1000)
     x, iterations = solver.solve(A, b)          # iterations: CG steps, 1 for a direct solve
-    solver.last                                 # what solved it: "band32", "band64", "cholmod", "lu", "cg-ic", ...
+    solver.last                                 # what solved it: "pardiso32", "band32", "lu", "cg-ic", "cg-amg", ...
+    solver.inertia                              # (positive, negative) pivots of the last factor, when known
 
-Methods: "direct" (the fastest direct solver for the matrix: banded Cholesky,
-CHOLMOD when scikit-sparse imports, SuperLU), "cg" (preconditioned conjugate
-gradients), "auto" (direct or cg by the estimated cost, see `choose`), and the
-individual direct solvers "band", "cholmod", "lu".
+Methods:
+  "direct"   the cheapest factorisation for the matrix by the cost model below: PARDISO
+             (runtime/pardiso.py, MKL's nested-dissection LDL^T) on compact bodies, the banded
+             Cholesky (runtime/band.py) on bars and slabs; SuperLU where neither is there;
+  "auto"     "direct", or CG with algebraic multigrid past the size where a factor costs more
+             (memory or modelled time) than multigrid; without MKL, band or IC(0)-CG as before;
+  "cg"       CG preconditioned by IC(0) (or the `preconditioner`: "jacobi", "amg");
+  "amg"      CG preconditioned by smoothed-aggregation multigrid with the rigid-body
+             near-nullspace (runtime/amg.py; `ConstrainedSystem` passes the modes);
+  "band", "pardiso", "lu": one direct solver by name.
 
-The banded Cholesky orders the unknowns for a small bandwidth (Cuthill-McKee
-from the far end of a level structure, cached per sparsity pattern), factors
-in single precision with LAPACK (spbtrf, one BLAS thread) and iterates to
-double-precision accuracy with CG preconditioned by that factor; a factor that
-fails (indefinite or too ill-conditioned for float32) is redone in double
-precision, and a matrix that is not positive definite goes to SuperLU's LU.
-Every direct path therefore returns the solution of an indefinite system too.
-The band factor is kept: the next matrix of the same pattern is first solved
-by CG preconditioned with it (see LinearSolver, reuse).
+Indefinite matrices never fail a run by themselves: PARDISO factors them (symmetric
+indefinite pivoting, and reports the inertia), the band path hands them to PARDISO or
+SuperLU, and a CG that breaks down (or meets a non-positive diagonal) falls back to the
+direct solver (`fallback` says why).  Newton (runtime.integrators) reads the direction it
+gets and switches on PSD projection where it does not descend.
 
-Every decision (which solver, reuse or refactor, how many iterations) comes from
-the matrix's size, pattern and values, never from measured times: the same
-sequence of systems gives the same bits on an idle or a loaded machine (issue
-#10).  Times are only reported (`LinearSolver.time`).
+Factor reuse: a kept band or PARDISO factor first preconditions CG on the next matrix of the
+same pattern (the next Newton iteration or implicit step), for at most as many iterations
+as cost half a new factorisation by the cost model; `last` then ends in "-reuse".
+
+Every decision (which solver, reuse or refactor, how many iterations) comes from the
+matrix's size, pattern and values, never from measured times or the thread count: the same
+sequence of systems gives the same bits on an idle or a loaded machine, with one thread or
+two (issue #10; PARDISO runs in MKL's reproducible mode).  Times are only reported.
 
 Dirichlet conditions are applied by elimination before calling these (see
 `ConstrainedSystem`): K_ff x_f = r_f - K_fc x_c.
@@ -34,138 +41,101 @@ import time
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
-from scipy.linalg import lapack
-from threadpoolctl import ThreadpoolController
 
+from . import amg, pardiso
+from .band import BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_solve, one_blas_thread
+from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
 from .errors import TensormassError
 
 __all__ = ["LinearSolver", "ConstrainedSystem", "DIRECT_LIMIT", "METHODS", "PRECONDITIONERS",
-           "has_cholmod", "has_pyamg", "warm_up"]
+           "has_pardiso", "has_pyamg", "warm_up", "band_ordering", "band_costs", "reuse_cap",
+           "pardiso_costs", "amg_cost"]
 
-METHODS = ("auto", "direct", "cg", "band", "cholmod", "lu")
+METHODS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 PRECONDITIONERS = ("ic", "jacobi", "amg")
 
-# --------------------------------------------------------------------------- thresholds
+# --------------------------------------------------------------------------- the cost model
 #
-# Measured on the 2-core AMD EPYC (AVX-512) this project benchmarks on, shared with
-# other jobs, best of 3-5, on the matrices `tensormass bench steps` builds (one fresh
-# solve each, no factor reuse):
+# Modelled seconds on the benchmark machine (2-core AMD EPYC, one thread), from the pattern
+# alone: the same matrices get the same decisions on any load and any thread count.
 #
-#   system (free dofs, nnz, bandwidth kd)             band32   SuperLU   CG-Jacobi       CG-IC(0)
-#   3072-hex neo-Hookean K (11 664, 0.80 M, 275)        32 ms    294 ms   114 ms/210 it   132 ms/112 it
-#   10k-tet StVK implicit Euler (6 552, 0.26 M, 278)    14 ms    114 ms    41 ms/220 it    30 ms/73 it
-#   20k-hex StVK implicit Euler (64 980, 4.8 M, 1145)  1.4 s      16 s    0.76 s/217 it   0.58 s/69 it
-#
-# (band32: float32 LAPACK factor + CG refinement to 1e-10 relative residual, one BLAS
-# thread: with two OpenBLAS threads on the shared cores spbtrf/dpbtrf ran 5-10x slower;
-# cholespy 2.1 (CHOLMOD, simplicial) took 480 ms / 170 ms / 32 s, slower than SuperLU.)
-# The band solve costs about n kd^2 x 1.7-3.7e-11 s, CG-IC(0) about nnz x 1.2-1.7e-7 s:
-# "auto" takes the band Cholesky while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz (3072
-# hexes: 1.1e3 x nnz, 10k tets: 2.0e3 x nnz -> band; 20k hexes: 17.5e3 x nnz -> CG),
-# and always below AUTO_DIRECT_BELOW unknowns.
+# Measured, one fresh solve each (analysis + factor; band: its factor + refinement):
+#   system (free dofs, nnz, kd, PARDISO factor flops)        band32    PARDISO 32-bit    SuperLU  IC-CG
+#   10k-tet StVK bar (6 552, 0.26 M, 278, 0.49 G)             18 ms    21 + 21 ms       114 ms    30 ms
+#   3072-hex bar (11 664, 0.80 M, 275, 1.3 G)                 48 ms    48 + 47 ms       294 ms   132 ms
+#   20k-hex bar (64 980, 4.8 M, 1145, 53 G)                  1.6 s     0.40 + 1.4 s       16 s   0.6 s
+#   tetra organ h 6 mm (9 819, 0.39 M, 863, 1.3 G)            133 ms   37 + 40 ms        0.67 s    68 ms
+#   tetra10 organ h 8 mm (34 434, 2.6 M, 3677, 18 G)         8.2 s    0.29 + 0.81 s        -     1.3 s
+#   tetra10 organ h 6 mm (77 085, 6.0 M, 6713, 105 G)         58 s    0.48 + 1.4 s (2 threads)
+# (the organ: examples/organ/make_organ.py scaled 2.2x, liver-sized; `tensormass bench organ`.)
+# PARDISO's factor runs at 24-37 Gflop/s in single precision on one thread (13-20 in double),
+# its solve streams the factor: ~2.2e-9 s per factor entry (single), its analysis (nested
+# dissection, once per pattern) ~1.6e-7 s per stored entry.  Multigrid-CG (pyamg, rigid-body
+# modes): setup ~4e-7 s and ~2.5e-8 s per iteration per stored entry, ~40 iterations.
+AUTO_DIRECT_BELOW = 3_000            # below this many unknowns: the band Cholesky, no model needed
+PARDISO_ANALYSE_ABOVE = 0.05         # modelled band seconds past which PARDISO's analysis is worth running
+PARDISO_FLOPS = 30e9                 # single-precision factor rate (double: half)
+PARDISO_OVERHEAD = 2e-3
+PARDISO_SOLVE_PER_ENTRY = 2.2e-9     # per factor entry, single precision (double: 1.5x)
+PARDISO_MAX_BYTES = 8 * 2**30        # "auto" takes multigrid past this factor memory
+AMG_SECONDS_PER_NNZ = 4e-7 + 40 * 2.5e-8
+# Without MKL: "auto" takes the band Cholesky while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz,
+# IC(0)-CG beyond (the rule of session 3: CG-IC(0) costs about nnz x 1.2-1.7e-7 s).
 AUTO_BAND_WORK_PER_NNZ = 6_000.0
-AUTO_DIRECT_BELOW = 3_000
-# "direct" prefers CHOLMOD (scikit-sparse, when installed; fill-reducing orderings beat a
-# band on compact 3D bodies) once the band factor would cost more than this (~0.1 s).
-DIRECT_BAND_WORK_CHOLMOD = 5e9
-# The band factor is refused (SuperLU instead) beyond this many float64 band entries (2 GiB).
-BAND_MAX_ENTRIES = 2**28
-# Relative residual the band Cholesky refines to, and its refinement budget.
-DIRECT_TOL = 1e-10
-_REFINE_MAX = 30
-# A kept band factor preconditions CG on the next matrix of the same pattern (the next
-# implicit step or Newton iteration) for at most _REUSE_MAX iterations, and at most half
-# of a new factorisation's modelled cost (below), before it is refactored.
-_REUSE_MAX = 20
-_REUSE_MIN = 3
-# Cost model of the band path: modelled seconds on the benchmark machine (2-core EPYC,
-# 32 MiB L3, one BLAS thread, float32 factor).  It replaces the measured seconds the reuse
-# cap used to come from: those made the decision, and so the bits of the result, depend on
-# the machine load (two identical runs started together differed at 1e-13, issue #10).
-#  - spbtrf does n kd^2 flops at a rate that grows with the band (its blocked level-3
-#    updates need a wide one): 20 Gflop/s at kd 173, 37 at kd 335, 57 at kd 1145, about
-#    _FACTOR_FLOPS kd / (kd + _FACTOR_BLOCK_KD);
-#  - one refinement iteration (two band triangular solves, 4 n kd flops, one sparse
-#    product, 2 nnz, a few vector operations) is memory-bound: 7-10 Gflop/s while the
-#    factor fits in the cache, 5.4-6.3 once it streams from memory, plus ~25 us of calls.
-# Model / best measured (idle), factor and one reuse iteration, on `bench steps` and test
-# step matrices: 1k tetrahedra 0.40 / 0.39 ms, 59 / 62 us; 10k tetrahedra 15 / 17 ms,
-# 0.85 / 0.77 ms; 2k hexahedra 22 / 22 ms, 1.15 / 1.21 ms; 6k hexahedra 133 / 132 ms,
-# 8.2 / 7.6 ms; 20k hexahedra 1.44 / 1.39-1.55 s, 53 / 55-57 ms.  float64 factors: twice
-# the bytes and half the flop rate.
-_FACTOR_FLOPS = 80e9
-_FACTOR_BLOCK_KD = 400.0
-_SOLVE_FLOPS_CACHED = 9.5e9
-_SOLVE_FLOPS_MEMORY = 5.8e9
-_CACHE_BYTES = 32 * 2**20
-_ITERATION_OVERHEAD_S = 25e-6
-# Above this many unknowns "auto" never factorises (a band plan alone would cost too much).
-DIRECT_LIMIT = 200_000
-# IC(0) breaks down on some SPD matrices: retry with these diagonal shifts, then use Jacobi.
-_IC_SHIFTS = (0.0, 1e-3, 1e-2, 1e-1)
-
-try:                                    # optional accelerators (pip install tensormass[fast])
-    from sksparse import cholmod as _cholmod
-except ImportError:                     # pragma: no cover - depends on the environment
-    _cholmod = None
-try:
-    import pyamg as _pyamg
-except ImportError:                     # pragma: no cover
-    _pyamg = None
-
-_threads = None
+# Above this many unknowns "auto" never factorises.
+DIRECT_LIMIT = 2_000_000
+# An AMG hierarchy is reused on later matrices of the pattern until CG needs more than this
+# many times the iterations it took when it was built (plus a margin): then it is rebuilt.
+AMG_REBUILD_RATIO = 2.0
+AMG_REBUILD_MARGIN = 10
 
 
-def _one_blas_thread():
-    """Context: LAPACK band routines on one thread (see the thresholds above)."""
-    global _threads
-    if _threads is None:
-        _threads = ThreadpoolController()
-    return _threads.limit(limits=1, user_api="blas")
-
-
-def has_cholmod() -> bool:
-    return _cholmod is not None
+def has_pardiso() -> bool:
+    return pardiso.available()
 
 
 def has_pyamg() -> bool:
-    return _pyamg is not None
+    return amg.available()
 
 
-def band_costs(n: int, kd: int, nnz: int, itemsize: int = 4) -> tuple[float, float]:
-    """(factorisation, one refinement iteration) of the band path in modelled seconds (see
-    the cost model above): a function of the pattern and precision alone, never a timing."""
-    n, kd, nnz = float(n), float(kd), float(nnz)
-    slower = itemsize / 4.0                             # float64: twice the bytes, half the rate
-    factor = slower * n * kd * (kd + _FACTOR_BLOCK_KD) / _FACTOR_FLOPS    # n kd^2 flops at the rate above
-    cached = itemsize * n * (kd + 1.0) <= _CACHE_BYTES
-    rate = _SOLVE_FLOPS_CACHED if cached else _SOLVE_FLOPS_MEMORY
-    iteration = slower * (2.0 * nnz + 4.0 * n * kd) / rate + _ITERATION_OVERHEAD_S
-    return factor, iteration
+def pardiso_costs(flops: float, factor_nnz: float, single: bool = True) -> tuple[float, float]:
+    """(factorisation, one solve) of PARDISO in modelled seconds, from its analysis' statistics."""
+    slower = 1.0 if single else 2.0
+    return (PARDISO_OVERHEAD + slower * flops / PARDISO_FLOPS,
+            (1.0 if single else 1.5) * PARDISO_SOLVE_PER_ENTRY * factor_nnz + 25e-6)
+
+
+def amg_cost(nnz: int) -> float:
+    """Modelled seconds of one multigrid-preconditioned CG solve (setup included)."""
+    return AMG_SECONDS_PER_NNZ * float(nnz)
 
 
 def reuse_cap(n: int, kd: int, nnz: int, itemsize: int = 4) -> int:
-    """Most CG iterations a kept band factor gets before refactoring: as many as cost half a
-    new factorisation by the cost model, within [_REUSE_MIN, _REUSE_MAX].
-
-    A function of the pattern alone (n unknowns, half-bandwidth kd, nnz stored entries,
-    the factor's precision), so the same matrices get the same decisions on any load.
-    """
-    factor, iteration = band_costs(n, kd, nnz, itemsize)
-    return int(min(_REUSE_MAX, max(_REUSE_MIN, 0.5 * factor / iteration)))
+    """CG iterations a kept band factor may precondition (see runtime.band.reuse_cap)."""
+    return reuse_iterations(*band_costs(n, kd, nnz, itemsize))
 
 
-class _BandPlan:
-    """A bandwidth-reducing ordering of one sparsity pattern."""
+def _worker_threads() -> int:
+    """The runtime's thread count (runtime.parallel when present, else numba's)."""
+    try:
+        from .parallel import worker_threads
+        return int(worker_threads())
+    except ImportError:                  # pragma: no cover - before runtime.parallel existed
+        import numba
+        return int(numba.get_num_threads())
+
+
+# --------------------------------------------------------------------------- per pattern
+
+
+class _Pattern:
+    """What is computed once per sparsity pattern: the band ordering and PARDISO's analysis (lazily)."""
 
     def __init__(self, A):
         self.indptr, self.indices = A.indptr, A.indices
-        self.n = A.shape[0]
-        self.perm, self.iperm, self.kd = band_ordering(A)
-        self.work = float(self.n) * float(self.kd) ** 2
-        self.entries = (self.kd + 1) * self.n
-        self.nnz = int(A.nnz)
+        self.n, self.nnz = A.shape[0], int(A.nnz)
+        self._band = None
+        self._pardiso = None
 
     def matches(self, A) -> bool:
         if A.shape[0] != self.n:
@@ -175,24 +145,83 @@ class _BandPlan:
         return (A.indices.size == self.indices.size and np.array_equal(A.indptr, self.indptr)
                 and np.array_equal(A.indices, self.indices))
 
+    def band(self, A) -> BandPlan:
+        if self._band is None:
+            self._band = BandPlan(A)
+        return self._band
+
+    def band_seconds(self, A) -> float:
+        """Modelled seconds of a band solve (factor + a few refinement iterations)."""
+        plan = self.band(A)
+        if plan.entries > BAND_MAX_ENTRIES:
+            return np.inf
+        factor, iteration = band_costs(plan.n, plan.kd, plan.nnz)
+        return factor + 3.0 * iteration
+
+    def pardiso(self, A) -> "_PardisoPlan":
+        if self._pardiso is None:
+            self._pardiso = _PardisoPlan(A)
+        return self._pardiso
+
+
+class _PardisoPlan:
+    """PARDISO for one pattern: the upper-triangle entries of A and two handles (float32 first,
+    float64 on demand), each analysed once.  `stats`: the analysis' flops, factor size, memory."""
+
+    def __init__(self, A):
+        rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
+        self.upper = np.flatnonzero(A.indices >= rows)                    # A is canonical CSR
+        counts = np.bincount(rows[self.upper], minlength=A.shape[0])
+        self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self.indices = A.indices[self.upper].astype(np.int32)
+        self.n = A.shape[0]
+        self.handles = {}
+        self.stats = self.handle(True).statistics()
+
+    def handle(self, single: bool) -> pardiso.Pardiso:
+        if single not in self.handles:
+            h = pardiso.Pardiso(self.n, self.indptr, self.indices, single=single, threads=_worker_threads())
+            h.analyse()
+            self.handles[single] = h
+        return self.handles[single]
+
+    def costs(self, single: bool = True) -> tuple[float, float]:
+        return pardiso_costs(self.stats["factor_flops"], self.stats["factor_nnz"], single)
+
+
+class _PardisoFactor:
+    """A PARDISO factor of one matrix; calling it applies A^-1 (in the factor's precision)."""
+
+    def __init__(self, plan: _PardisoPlan, single: bool):
+        self.plan, self.single = plan, single
+        self.handle = plan.handle(single)
+        self.name = "pardiso32" if single else "pardiso64"
+        self.reuse_cap = reuse_iterations(*plan.costs(single))
+
+    def factor(self, A) -> tuple[int, int]:
+        self.handle.threads = _worker_threads()
+        self.handle.factor(A.data[self.plan.upper])
+        return self.handle.inertia
+
+    def __call__(self, r):
+        return self.handle.solve(r)
+
+
+# --------------------------------------------------------------------------- the solver
+
 
 class LinearSolver:
     """Solve A x = b for a sparse symmetric A; see the module docstring for the methods.
 
-    preconditioner for CG: "ic" (default: incomplete Cholesky IC(0), with a
-    diagonal shift if it breaks down, Jacobi if it still does), "jacobi" or
-    "amg" (smoothed aggregation, only when pyamg imports; IC otherwise).  A CG
-    run that hits the iteration cap returns its last iterate (an inexact Newton
-    step, like the thesis' fixed 20 iterations); `self.converged` says whether
-    it met tol.
+    preconditioner for "cg": "ic" (default: incomplete Cholesky IC(0), with a diagonal
+    shift if it breaks down, Jacobi if it still does), "jacobi" or "amg".  A CG run that
+    hits the iteration cap returns its last iterate (an inexact Newton step, like the
+    thesis' fixed 20 iterations); `self.converged` says whether it met tol.
 
-    reuse: the band Cholesky keeps its factor; the next system with the same
-    pattern is first solved by CG preconditioned with it (to the same 1e-10
-    relative residual), which takes a few iterations while the matrix changes
-    little (consecutive implicit steps, late Newton iterations); otherwise it is
-    refactored.  `last` then ends in "-reuse".  The iteration cap comes from the
-    pattern's cost model (`reuse_cap`), never from timings.
-
+    reuse: keep the band / PARDISO factor (and the multigrid hierarchy) for the next
+    matrix of the same pattern (see the module docstring).
+    near_nullspace: (n, k) rigid-body modes of the unknowns for multigrid (set by
+    ConstrainedSystem), or None.
     time: seconds spent in solve, reported only (no decision reads it).
     """
 
@@ -202,56 +231,86 @@ class LinearSolver:
             raise TensormassError(f"unknown linear solver {method!r}; use {', '.join(METHODS)}")
         if preconditioner not in PRECONDITIONERS:
             raise TensormassError(f"unknown preconditioner {preconditioner!r}; use {', '.join(PRECONDITIONERS)}")
+        if method == "pardiso" and not pardiso.available():
+            raise TensormassError(f"linear solver 'pardiso' is unavailable: {pardiso.unavailable_reason()}")
         self.method, self.tol, self.max_iterations = method, float(tol), int(max_iterations)
         self.preconditioner = preconditioner
         self.converged = True
         self.time = 0.0                          # statistics only: never an input to a decision
         self.last = None
+        self.fallback = None                     # why the last solve left the chosen solver, if it did
+        self.inertia = None                      # (positive, negative) pivots of the last PARDISO factor
         self.reuse = bool(reuse)
-        self._plan = None
-        self._factor = None                      # last band factor (reuse)
+        self.near_nullspace = None
+        self._pattern = None
+        self._choice = None                      # (pattern, method) -> kind, cached per pattern
+        self._factor = None                      # last band / PARDISO factor (reuse)
         self._skip_reuse = 0                     # calls left that refactor without trying reuse
         self._reuse_backoff = 0
+        self._amg = None                         # (hierarchy, iterations when built)
 
     # -- choice -------------------------------------------------------------------------------
-    def plan(self, A) -> _BandPlan:
-        """The band ordering of A's pattern (computed once per pattern)."""
-        if self._plan is None or not self._plan.matches(A):
-            self._plan = _BandPlan(A)
-            self._factor = None
-        return self._plan
+    def pattern(self, A) -> _Pattern:
+        """What is kept for A's sparsity pattern (computed once per pattern)."""
+        if self._pattern is None or not self._pattern.matches(A):
+            self._pattern = _Pattern(A)
+            self._factor = self._amg = self._choice = self.inertia = None
+        return self._pattern
+
+    def plan(self, A) -> BandPlan:
+        """The band ordering of A's pattern."""
+        return self.pattern(A).band(A)
 
     def choose(self, A) -> str:
-        """The solver "solve" uses for A: "band", "cholmod", "lu" or "cg"."""
+        """The solver "solve" uses for A: "band", "pardiso", "lu", "cg" or "amg" (cached per pattern)."""
+        pattern = self.pattern(A)
+        if self._choice is None:
+            self._choice = self._choose(A, pattern)
+        return self._choice
+
+    def _choose(self, A, pattern) -> str:
         method, n = self.method, A.shape[0]
-        if method in ("band", "cholmod", "lu", "cg"):
-            if method == "cholmod" and _cholmod is None:
-                return "lu"
+        if method == "cg" and self.preconditioner == "amg":
+            return "amg" if amg.available() else "cg"
+        if method in ("band", "pardiso", "lu", "cg"):
             return method
-        if method == "auto" and n > AUTO_DIRECT_BELOW:
-            if n > DIRECT_LIMIT:
-                return "cg"
-            plan = self.plan(A)
-            if plan.work > AUTO_BAND_WORK_PER_NNZ * A.nnz or plan.entries > BAND_MAX_ENTRIES:
-                return "cg"
+        if method == "amg":
+            return "amg" if amg.available() else "cg"
+        if n <= AUTO_DIRECT_BELOW:
             return "band"
-        plan = self.plan(A)
-        if _cholmod is not None and plan.work > DIRECT_BAND_WORK_CHOLMOD:
-            return "cholmod"
-        return "band" if plan.entries <= BAND_MAX_ENTRIES else "lu"
+        if not pardiso.available():                       # the rules from before MKL
+            plan = pattern.band(A)
+            if method == "auto" and (n > DIRECT_LIMIT or plan.entries > BAND_MAX_ENTRIES
+                                     or plan.work > AUTO_BAND_WORK_PER_NNZ * A.nnz):
+                return "cg"
+            return "band" if plan.entries <= BAND_MAX_ENTRIES else "lu"
+        if method == "auto" and n > DIRECT_LIMIT:
+            return "amg" if amg.available() else "cg"
+        band = pattern.band_seconds(A)
+        if band <= PARDISO_ANALYSE_ABOVE:
+            return "band"
+        plan = pattern.pardiso(A)
+        factor, solve = plan.costs(single=True)
+        if band <= factor + 3.0 * solve:
+            return "band"
+        if method == "auto" and amg.available() and (plan.stats["memory_bytes"] > PARDISO_MAX_BYTES
+                                                     or factor > amg_cost(A.nnz)):
+            return "amg"
+        return "pardiso"
 
     def kind_for(self, A) -> str:
         """"direct" or "cg" (A: the matrix, or only its size for the fixed methods)."""
         if isinstance(A, (int, np.integer)):
             if self.method == "auto":
                 return "direct" if A <= AUTO_DIRECT_BELOW else "cg"
-            return "cg" if self.method == "cg" else "direct"
-        return "cg" if self.choose(A) == "cg" else "direct"
+            return "cg" if self.method in ("cg", "amg") else "direct"
+        return "cg" if self.choose(A) in ("cg", "amg") else "direct"
 
     # -- solve --------------------------------------------------------------------------------
     def solve(self, A, b: np.ndarray, x0: np.ndarray | None = None):
         """(x, iterations); raises TensormassError on a singular system or NaN/Inf."""
         start = time.perf_counter()
+        self.fallback = None
         try:
             b = np.asarray(b, dtype=float)
             if not np.all(np.isfinite(b)):
@@ -265,9 +324,12 @@ class LinearSolver:
             if not np.all(np.isfinite(A.data)):
                 raise TensormassError("linear solve: the system matrix contains NaN/Inf "
                                       "(inverted elements? a diverging step?)")
+            if not A.has_canonical_format:
+                A = A.copy()
+                A.sum_duplicates()
             kind = self.choose(A)
-            if kind == "cg":
-                x, its, self.converged = self._cg(A, b, x0)
+            if kind in ("cg", "amg"):
+                x, its, self.converged = self._iterative(A, b, x0, kind)
             else:
                 x, its = self._direct(A, b, kind), 1
                 self.converged = True
@@ -278,76 +340,144 @@ class LinearSolver:
         finally:
             self.time += time.perf_counter() - start
 
+    def _iterative(self, A, b, x0, kind):
+        """CG (IC(0)/Jacobi or multigrid); on breakdown (not positive definite) the direct solver."""
+        try:
+            if np.any(A.diagonal() <= 0):
+                raise _Breakdown("a non-positive diagonal entry")
+            return self._amg_cg(A, b, x0) if kind == "amg" else self._cg(A, b, x0)
+        except _Breakdown as why:
+            self.fallback = f"{kind} stopped ({why}: the matrix is not positive definite); solved directly"
+            return self._direct(A, b, self._direct_kind(A)), 1, True
+
+    def _direct_kind(self, A) -> str:
+        if pardiso.available() and A.shape[0] > AUTO_DIRECT_BELOW:
+            return "pardiso"
+        return "band" if self.pattern(A).band(A).entries <= BAND_MAX_ENTRIES else "lu"
+
     def _direct(self, A, b, kind):
-        if kind == "band":
-            with _one_blas_thread():
-                x = self._band(A, b)
+        if kind in ("band", "pardiso"):
+            x = self._reused(A, b)
             if x is not None:
                 return x
-        elif kind == "cholmod" and _cholmod is not None:
-            try:
-                x = _cholmod.cholesky(A.tocsc())(b)
-                if np.all(np.isfinite(x)):
-                    self.last = "cholmod"
+            self._factor = None
+            x = self._band(A, b) if kind == "band" else self._pardiso(A, b)
+            if x is not None:
+                return x
+            if kind == "band" and pardiso.available():      # not positive definite: LDL^T
+                x = self._pardiso(A, b)
+                if x is not None:
                     return x
-            except Exception:                       # not positive definite (or CHOLMOD failed): LU
-                pass
         self._factor = None
         self.last = "lu"
         return _lu(A, b)
 
-    def _band(self, A, b):
-        """Band Cholesky; with reuse, the previous factor of this pattern preconditions CG first."""
-        plan = self.plan(A)
+    def _reused(self, A, b):
+        """CG preconditioned by the kept factor of this pattern, while that pays (cost model)."""
         old = self._factor
-        if self.reuse and old is not None and old.plan is plan:
-            if self._skip_reuse > 0:
-                self._skip_reuse -= 1
-            else:
-                # worth it while cheaper than half a new factorisation (modelled, not timed)
-                out = _refine(A, b, old, exact=False, max_iterations=old.reuse_cap)
-                if out is not None:
-                    self._reuse_backoff = 0
-                    self.last = old.name + "-reuse"
-                    return out[0]
-                # the matrix moved on (large Newton steps): refactor the next 1, 2, 4, ... times directly
-                self._skip_reuse = self._reuse_backoff = min(2 * self._reuse_backoff + 1, 63)
-        self._factor = None
-        out = _band_solve(A, b, plan)
+        if not (self.reuse and old is not None and old.plan is not None):
+            return None
+        if self._skip_reuse > 0:
+            self._skip_reuse -= 1
+            return None
+        out = refine(A, b, old, exact=False, max_iterations=old.reuse_cap)
+        if out is not None:
+            self._reuse_backoff = 0
+            self.last = old.name + "-reuse"
+            return out[0]
+        # the matrix moved on (large Newton steps): refactor the next 1, 2, 4, ... times directly
+        self._skip_reuse = self._reuse_backoff = min(2 * self._reuse_backoff + 1, 63)
+        return None
+
+    def _band(self, A, b):
+        with one_blas_thread():
+            out = band_solve(A, b, self.plan(A))
         if out is None:
             return None
         x, factor = out
-        if self.reuse:
-            self._factor = factor
-        self.last = factor.name
+        self._keep(factor)
         return x
 
+    def _pardiso(self, A, b):
+        """PARDISO: float32 LDL^T refined by CG when positive definite; float64 (refined by
+        plain iterative refinement) when indefinite or when float32 does not converge."""
+        plan = self.pattern(A).pardiso(A)
+        for single in (True, False):
+            factor = _PardisoFactor(plan, single)
+            try:
+                positive, negative = factor.factor(A)
+            except pardiso.PardisoError:
+                continue
+            self.inertia = (positive, negative)
+            if negative == 0 and positive == A.shape[0]:
+                out = refine(A, b, factor, exact=not single, max_iterations=REFINE_MAX)
+                if out is not None:
+                    self._keep(factor)
+                    return out[0]
+            elif not single:
+                x = _iterative_refinement(A, b, factor)
+                if x is not None:
+                    self.last = factor.name
+                    return x
+        return None
+
+    def _keep(self, factor):
+        self._factor = factor if self.reuse else None
+        self.last = factor.name
+
     def _cg(self, A, b, x0):
-        d = A.diagonal()
-        if np.any(d <= 0):
-            raise TensormassError("cg needs a positive diagonal; the system matrix is not positive definite "
-                                  "(use linear = 'direct' or enable project_psd)")
-        if self.preconditioner == "amg" and _pyamg is not None:
-            self.last = "cg-amg"
-            return _scipy_cg(A, b, x0, self.tol, self.max_iterations, _amg(A))
         x = np.zeros_like(b) if x0 is None else np.array(x0, dtype=float)
         factor = None
         if self.preconditioner != "jacobi":
-            if not A.has_canonical_format:
-                A = A.copy()
-                A.sum_duplicates()
             factor = ic0(A)
         self.last = "cg-ic" if factor is not None else "cg-jacobi"
         if factor is None:
-            factor = jacobi_factor(d, _unsigned(A.indices).dtype)
-        its, status = _pcg(A.indptr, _unsigned(A.indices), A.data, b, *factor, x, self.tol, self.max_iterations)
+            factor = jacobi_factor(A.diagonal(), unsigned(A.indices).dtype)
+        its, status = pcg(A.indptr, unsigned(A.indices), A.data, b, *factor, x, self.tol, self.max_iterations)
         if status < 0:
-            raise TensormassError("linear solve (cg) broke down: the system matrix is not positive definite "
-                                  "(use linear = 'direct' or enable project_psd)")
+            raise _Breakdown("CG met a direction of non-positive curvature")
         return x, its, status == 0
 
+    def _amg_cg(self, A, b, x0):
+        """CG preconditioned by multigrid; the hierarchy is kept while it keeps CG short."""
+        self.last = "cg-amg"
+        modes = self.near_nullspace
+        if self._amg is None or not self.reuse:
+            self._amg = (amg.build(A, modes), None)
+        M, built_its = self._amg
+        try:
+            x, its, ok = amg.solve(A, b, M, x0, self.tol, self.max_iterations)
+        except TensormassError:
+            raise _Breakdown("multigrid CG broke down") from None
+        if built_its is None:
+            self._amg = (M, its)
+        elif its > AMG_REBUILD_RATIO * built_its + AMG_REBUILD_MARGIN:
+            self._amg = None                      # the matrix moved on: a new hierarchy next time
+        return x, its, ok
 
-# --------------------------------------------------------------------------- direct solvers
+
+class _Breakdown(Exception):
+    """CG cannot go on: the matrix is not positive definite."""
+
+
+def _iterative_refinement(A, b, M, tol=1e-10, steps=10):
+    """x = M b refined by x += M (b - A x) (any symmetric matrix, definite or not); None
+    when it does not reach a relative residual of 1e-8 (tol is the target)."""
+    bnorm = np.linalg.norm(b)
+    x = M(b)
+    best, best_res = x, np.linalg.norm(b - A @ x)
+    for _ in range(steps):
+        if not np.isfinite(best_res) or best_res <= tol * bnorm:
+            break
+        x = best + M(b - A @ best)
+        res = np.linalg.norm(b - A @ x)
+        if not res < best_res:
+            break
+        best, best_res = x, res
+    return best if best_res <= 1e-8 * bnorm else None
+
+
+# --------------------------------------------------------------------------- SuperLU
 
 
 def _lu(A, b):
@@ -363,411 +493,6 @@ def _lu(A, b):
     except RuntimeError as exc:                   # "Factor is exactly singular"
         raise TensormassError(f"linear solve failed ({exc}): the system matrix is singular; "
                               "is every rigid-body motion constrained?") from None
-
-
-class _BandFactor:
-    """A banded Cholesky factor of one matrix (for its pattern's plan); calling it applies A^-1."""
-
-    def __init__(self, plan, c, dtype):
-        self.plan, self.c, self.dtype = plan, c, dtype
-        self.trs = lapack.spbtrs if dtype is np.float32 else lapack.dpbtrs
-        self.name = "band32" if dtype is np.float32 else "band64"
-        # CG iterations it may precondition on a later matrix of the pattern (LinearSolver._band)
-        self.reuse_cap = reuse_cap(plan.n, plan.kd, plan.nnz, np.dtype(dtype).itemsize)
-
-    def __call__(self, r):
-        perm = self.plan.perm
-        y, _ = self.trs(self.c, r[perm].astype(self.dtype), lower=1, overwrite_b=1)
-        z = np.empty(self.plan.n)
-        z[perm] = y
-        return z
-
-
-def _band_factor(A, plan, dtype):
-    """Factor A in band storage in the given precision (call on one BLAS thread); None if not SPD."""
-    ab = np.empty((plan.kd + 1, plan.n), dtype=dtype, order="F")
-    _fill_band(A.indptr, A.indices, A.data, plan.iperm, ab)
-    factor = lapack.spbtrf if dtype is np.float32 else lapack.dpbtrf
-    c, info = factor(ab, lower=1, overwrite_ab=1)
-    if info != 0:
-        return None                             # not positive definite (in this precision)
-    return _BandFactor(plan, c, dtype)
-
-
-def _band_solve(A, b, plan):
-    """Banded Cholesky in float32 then float64, refined by factor-preconditioned CG.
-
-    Returns (x, factor), or None when A is not positive definite (the caller
-    falls back to LU).
-    """
-    for dtype in (np.float32, np.float64):
-        factor = _band_factor(A, plan, dtype)
-        if factor is None:
-            continue
-        out = _refine(A, b, factor, exact=dtype is np.float64, max_iterations=_REFINE_MAX)
-        if out is not None:
-            return out[0], factor
-    return None
-
-
-def _refine(A, b, M, exact, max_iterations):
-    """CG on A x = b preconditioned by M ~ A^-1, from x = M b, to DIRECT_TOL.
-
-    exact (M is a float64 factor of A): the first iterate is already a direct
-    solve; refinement only polishes it and stops when the residual stops
-    dropping.  Returns (x, iterations), or None when the iteration does not
-    converge in max_iterations (or breaks down).
-    """
-    bnorm = np.linalg.norm(b)
-    x = M(b)
-    r = b - A @ x
-    res = np.linalg.norm(r)
-    if not np.isfinite(res):
-        return None
-    best, best_res = x, res
-    z = M(r)
-    p = z.copy()
-    rz = r @ z
-    its = 0
-    while res > DIRECT_TOL * bnorm and its < max_iterations:
-        its += 1
-        q = A @ p
-        pq = p @ q
-        if not pq > 0.0:
-            break
-        alpha = rz / pq
-        x = x + alpha * p
-        r -= alpha * q
-        res = np.linalg.norm(r)
-        if res < best_res:
-            best, best_res = x, res
-        elif exact:
-            break                                    # round-off level reached
-        if res <= DIRECT_TOL * bnorm:
-            break
-        z = M(r)
-        rz_new = r @ z
-        p = z + (rz_new / rz) * p
-        rz = rz_new
-    if best_res > DIRECT_TOL * bnorm:               # the recursive residual may drift: check
-        true_res = np.linalg.norm(b - A @ best)
-        if not (true_res <= DIRECT_TOL * bnorm or (exact and true_res <= 1e-6 * bnorm)):
-            return None
-    return best, its
-
-
-@njit(cache=True)
-def _fill_band(indptr, indices, data, iperm, ab):
-    """Lower band storage of the permuted matrix: ab[pi - pj, pj] = a_ij for pi >= pj."""
-    ab[:, :] = 0.0
-    for i in range(indptr.size - 1):
-        pi = iperm[i]
-        for k in range(indptr[i], indptr[i + 1]):
-            pj = iperm[indices[k]]
-            if pi >= pj:
-                ab[pi - pj, pj] += data[k]
-
-
-# --------------------------------------------------------------------------- band ordering
-
-
-@njit(cache=True)
-def _bfs_levels(indptr, indices, start):
-    n = indptr.size - 1
-    level = np.full(n, -1, np.int64)
-    queue = np.empty(n, np.int64)
-    queue[0] = start
-    level[start] = 0
-    head, tail = 0, 1
-    while head < tail:
-        v = queue[head]
-        head += 1
-        for k in range(indptr[v], indptr[v + 1]):
-            w = indices[k]
-            if level[w] < 0:
-                level[w] = level[v] + 1
-                queue[tail] = w
-                tail += 1
-    return level
-
-
-@njit(cache=True)
-def _cuthill_mckee(indptr, indices, sources):
-    """Cuthill-McKee from a set of start vertices (in the given order); other components appended."""
-    n = indptr.size - 1
-    degree = np.empty(n, np.int64)
-    for i in range(n):
-        degree[i] = indptr[i + 1] - indptr[i]
-    seen = np.zeros(n, np.bool_)
-    order = np.empty(n, np.int64)
-    new = np.empty(n, np.int64)
-    head, tail, nxt = 0, 0, 0
-    for s in sources:
-        if not seen[s]:
-            seen[s] = True
-            order[tail] = s
-            tail += 1
-    while True:
-        while head < tail:
-            v = order[head]
-            head += 1
-            m = 0
-            for k in range(indptr[v], indptr[v + 1]):
-                w = indices[k]
-                if not seen[w]:
-                    seen[w] = True
-                    new[m] = w
-                    m += 1
-            for a in range(1, m):                  # by degree, then index (insertion sort)
-                x = new[a]
-                c = a - 1
-                while c >= 0 and (degree[new[c]] > degree[x] or (degree[new[c]] == degree[x] and new[c] > x)):
-                    new[c + 1] = new[c]
-                    c -= 1
-                new[c + 1] = x
-            for a in range(m):
-                order[tail] = new[a]
-                tail += 1
-        if tail == n:
-            break
-        while seen[nxt]:
-            nxt += 1
-        seen[nxt] = True
-        order[tail] = nxt
-        tail += 1
-    return order
-
-
-@njit(cache=True)
-def _bandwidth(indptr, indices, iperm):
-    kd = 0
-    for i in range(indptr.size - 1):
-        for k in range(indptr[i], indptr[i + 1]):
-            d = iperm[i] - iperm[indices[k]]
-            if d > kd:
-                kd = d
-    return kd
-
-
-def band_ordering(A):
-    """(perm, iperm, kd): a small-bandwidth ordering of A's (symmetric) pattern.
-
-    Candidates: the given order, and Cuthill-McKee started from the whole last
-    level of a breadth-first search from a minimum-degree vertex (and again from
-    the far end of that): on a bar this numbers the unknowns slice by slice.
-    The smallest bandwidth wins.  (scipy's reverse_cuthill_mckee starts from one
-    vertex and gave kd 653 / 332 / 3083 on the three `bench steps` matrices where
-    this gives 275 / 278 / 1145: 2.4-7x the band work.)
-    """
-    indptr, indices = A.indptr, A.indices
-    n = A.shape[0]
-    candidates = [np.arange(n, dtype=np.int64)]
-    if n > 1:
-        start = int(np.argmin(np.diff(indptr)))
-        for _ in range(2):
-            level = _bfs_levels(indptr, indices, start)
-            far = np.flatnonzero(level == level.max()).astype(np.int64)
-            order = _cuthill_mckee(indptr, indices, far)
-            candidates.append(order)
-            start = int(order[-1])
-    best = None
-    for perm in candidates:
-        iperm = np.empty(n, dtype=np.int64)
-        iperm[perm] = np.arange(n)
-        kd = _bandwidth(indptr, indices, iperm)
-        if best is None or kd < best[2]:
-            best = (perm, iperm, int(kd))
-    return best
-
-
-# --------------------------------------------------------------------------- conjugate gradients
-
-
-@njit(cache=True)
-def _csr_matvec(indptr, indices, data, x, out):
-    """out = A x.  indices unsigned (no negative-index wraparound code) and four partial
-    sums per row (no single dependency chain): as fast as scipy's, twice the naive loop."""
-    for i in range(out.size):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        a3 = 0.0
-        k = indptr[i]
-        end = indptr[i + 1]
-        while k + 3 < end:
-            a0 += data[k] * x[indices[k]]
-            a1 += data[k + 1] * x[indices[k + 1]]
-            a2 += data[k + 2] * x[indices[k + 2]]
-            a3 += data[k + 3] * x[indices[k + 3]]
-            k += 4
-        while k < end:
-            a0 += data[k] * x[indices[k]]
-            k += 1
-        out[i] = (a0 + a1) + (a2 + a3)
-
-
-def _unsigned(indices):
-    """The same index array viewed as unsigned (indices are never negative)."""
-    return indices.view(np.uint32 if indices.dtype.itemsize == 4 else np.uint64)
-
-
-@njit(cache=True)
-def _ic0_factor(indptr, indices, data, shift):
-    """IC(0) on the lower triangle of a symmetric CSR with sorted indices.
-
-    Returns (Lp, Li, Lv, inv_diag, ok): the strictly lower part of L in CSR and
-    1 / diag(L); ok is False when a pivot is not positive or a diagonal entry is
-    missing.  The diagonal of A is scaled by (1 + shift).
-    """
-    n = indptr.size - 1
-    Lp = np.zeros(n + 1, np.int64)
-    for i in range(n):
-        c = 0
-        for k in range(indptr[i], indptr[i + 1]):
-            if indices[k] < i:
-                c += 1
-        Lp[i + 1] = Lp[i] + c
-    Li = np.empty(Lp[n], indices.dtype)
-    Lv = np.empty(Lp[n])
-    inv_diag = np.empty(n)
-    w = np.zeros(n)
-    mark = np.full(n, -1, np.int64)
-    for i in range(n):
-        p = Lp[i]
-        diag = 0.0
-        has_diag = False
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if j < i:
-                Li[p] = j
-                w[j] = data[k]
-                mark[j] = i
-                p += 1
-            elif j == i:
-                diag = data[k] * (1.0 + shift)
-                has_diag = True
-        if not has_diag:
-            return Lp, Li, Lv, inv_diag, False
-        for p in range(Lp[i], Lp[i + 1]):       # l_ik = (a_ik - sum_j<k l_ij l_kj) / l_kk, k ascending
-            k = Li[p]
-            s = w[k]
-            for q in range(Lp[k], Lp[k + 1]):
-                j = Li[q]
-                if mark[j] == i:
-                    s -= w[j] * Lv[q]
-            s *= inv_diag[k]
-            w[k] = s
-            Lv[p] = s
-            diag -= s * s
-        if not diag > 0.0:
-            return Lp, Li, Lv, inv_diag, False
-        inv_diag[i] = 1.0 / np.sqrt(diag)
-    return Lp, Li, Lv, inv_diag, True
-
-
-def jacobi_factor(diagonal, index_dtype=np.uint32):
-    """Jacobi as an IC factor with no off-diagonal entries: L = diag(A)^(1/2), so one CG loop serves both."""
-    n = diagonal.size
-    return np.zeros(n + 1, np.int64), np.empty(0, index_dtype), np.empty(0), 1.0 / np.sqrt(diagonal)
-
-
-def ic0(A):
-    """IC(0) factor (Lp, Li, Lv, inv_diag) of a canonical CSR A, shifting the diagonal on breakdown; None if all fail."""
-    for shift in _IC_SHIFTS:
-        Lp, Li, Lv, inv_diag, ok = _ic0_factor(A.indptr, _unsigned(A.indices), A.data, shift)
-        if ok:
-            return Lp, Li, Lv, inv_diag
-    return None
-
-
-@njit(cache=True)
-def _ic_apply(Lp, Li, Lv, inv_diag, r, z):
-    """z = (L L^T)^-1 r."""
-    n = r.size
-    for i in range(n):
-        a0 = 0.0
-        a1 = 0.0
-        p = Lp[i]
-        end = Lp[i + 1]
-        while p + 1 < end:
-            a0 += Lv[p] * z[Li[p]]
-            a1 += Lv[p + 1] * z[Li[p + 1]]
-            p += 2
-        if p < end:
-            a0 += Lv[p] * z[Li[p]]
-        z[i] = (r[i] - (a0 + a1)) * inv_diag[i]
-    for i in range(n - 1, -1, -1):
-        zi = z[i] * inv_diag[i]
-        z[i] = zi
-        for p in range(Lp[i], Lp[i + 1]):
-            z[Li[p]] -= Lv[p] * zi
-
-
-@njit(cache=True)
-def _pcg(indptr, indices, data, b, Lp, Li, Lv, inv_diag, x, tol, max_iterations):
-    """CG preconditioned by (L L^T)^-1 (IC(0), or Jacobi: see jacobi_factor) in place on x;
-    (iterations, status 0 ok / 1 cap / -1 breakdown).
-
-    Written out in numba rather than scipy's cg: small BLAS calls on tiny vectors cost
-    more than the matvec when OpenBLAS threads share busy cores.
-    """
-    n = b.size
-    r, z, p, q = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    _csr_matvec(indptr, indices, data, x, q)
-    bnorm = 0.0
-    for i in range(n):
-        r[i] = b[i] - q[i]
-        bnorm += b[i] * b[i]
-    stop = tol * np.sqrt(bnorm)
-    _ic_apply(Lp, Li, Lv, inv_diag, r, z)
-    rz = 0.0
-    rnorm = 0.0
-    for i in range(n):
-        p[i] = z[i]
-        rz += r[i] * z[i]
-        rnorm += r[i] * r[i]
-    for it in range(max_iterations + 1):
-        if np.sqrt(rnorm) <= stop:
-            return it, 0
-        if it == max_iterations:
-            return it, 1
-        _csr_matvec(indptr, indices, data, p, q)
-        pq = 0.0
-        for i in range(n):
-            pq += p[i] * q[i]
-        if not pq > 0.0:
-            return it, -1
-        alpha = rz / pq
-        rnorm = 0.0
-        for i in range(n):
-            x[i] += alpha * p[i]
-            r[i] -= alpha * q[i]
-            rnorm += r[i] * r[i]
-        _ic_apply(Lp, Li, Lv, inv_diag, r, z)
-        rz_new = 0.0
-        for i in range(n):
-            rz_new += r[i] * z[i]
-        beta = rz_new / rz
-        rz = rz_new
-        for i in range(n):
-            p[i] = z[i] + beta * p[i]
-    return max_iterations, 1
-
-
-def _scipy_cg(A, b, x0, tol, max_iterations, M):
-    count = [0]
-
-    def callback(_):
-        count[0] += 1
-
-    x, info = spla.cg(A, b, x0=x0, rtol=tol, maxiter=max_iterations, M=M, callback=callback)
-    if info < 0:
-        raise TensormassError("linear solve (cg) broke down: the system matrix is not positive definite")
-    return x, count[0], info == 0
-
-
-def _amg(A):
-    return _pyamg.smoothed_aggregation_solver(A.tocsr()).aspreconditioner()
 
 
 _warm = set()
@@ -794,8 +519,10 @@ class ConstrainedSystem:
     index maps computed once: A_ff x_f = b_f - A_fc x_c.
     """
 
-    def __init__(self, pattern, free: np.ndarray, fixed: np.ndarray):
+    def __init__(self, pattern, free: np.ndarray, fixed: np.ndarray, modes: np.ndarray | None = None):
         self.pattern, self.free, self.fixed = pattern, free, fixed
+        # rigid-body modes of the free dofs (multigrid's near-nullspace), or None
+        self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
         self.fc = pattern.submatrix_map(free, fixed) if fixed.size else None
         if free.size:
@@ -815,5 +542,6 @@ class ConstrainedSystem:
             x[self.fixed] = x_c
             rhs = rhs - self._block(data, self.fc) @ x_c
         guess = None if x0 is None else x0[self.free]
+        solver.near_nullspace = self.modes
         x[self.free], its = solver.solve(self._block(data, self.ff), rhs, guess)
         return x, its

@@ -52,17 +52,19 @@ def relres(A, x, b):
 
 @pytest.mark.parametrize("method,preconditioner,tol", [
     ("auto", "ic", 1e-9), ("direct", "ic", 1e-9), ("band", "ic", 1e-9), ("lu", "ic", 1e-9),
-    ("cholmod", "ic", 1e-9), ("cg", "ic", 1e-9), ("cg", "jacobi", 1e-9), ("cg", "amg", 1e-9)])
+    ("pardiso", "ic", 1e-9), ("amg", "ic", 1e-9), ("cg", "ic", 1e-9), ("cg", "jacobi", 1e-9),
+    ("cg", "amg", 1e-9)])
 def test_every_method_solves_spd(method, preconditioner, tol):
+    if method == "pardiso" and not solvers.has_pardiso():
+        pytest.skip("MKL (PARDISO) is not installed here")
     A, b = spd_system()
     solver = LinearSolver(method, tol=1e-11, max_iterations=5000, preconditioner=preconditioner)
     x, its = solver.solve(A, b)
     assert relres(A, x, b) < tol
     assert its >= 1 and solver.converged
-    expected = {"auto": ("band32", "band64"), "direct": ("band32", "band64", "cholmod"),
-                "band": ("band32", "band64"), "lu": ("lu",),
-                "cholmod": ("cholmod",) if solvers.has_cholmod() else ("lu",),
-                "cg": ("cg-ic", "cg-jacobi", "cg-amg")}[method]
+    expected = {"auto": ("band32", "band64"), "direct": ("band32", "band64"),
+                "band": ("band32", "band64"), "lu": ("lu",), "pardiso": ("pardiso32", "pardiso64"),
+                "amg": ("cg-amg",), "cg": ("cg-ic", "cg-jacobi", "cg-amg")}[method]
     assert solver.last in expected
     if method == "cg" and preconditioner == "jacobi":
         assert solver.last == "cg-jacobi"
@@ -72,16 +74,16 @@ def test_direct_solvers_agree_and_reuse_the_ordering():
     A, b = spd_system(1)
     solver = LinearSolver("band")
     x1, _ = solver.solve(A, b)
-    plan = solver._plan
+    plan = solver._pattern
     B = sp.csr_matrix((2.0 * A.data, A.indices, A.indptr), shape=A.shape)   # same pattern, new values
     x2, _ = solver.solve(B, b)
-    assert solver._plan is plan
+    assert solver._pattern is plan
     np.testing.assert_allclose(x2, 0.5 * x1, rtol=1e-8, atol=1e-10 * np.abs(x1).max())
     x_lu, _ = LinearSolver("lu").solve(A, b)
     np.testing.assert_allclose(x1, x_lu, rtol=1e-7, atol=1e-9 * np.abs(x1).max())
     C = grid_laplacian(4, 3, 3, shift=1.0)                  # another pattern: a new ordering
     solver.solve(C, np.ones(C.shape[0]))
-    assert solver._plan is not plan
+    assert solver._pattern is not plan
 
 
 def test_cg_warm_start_and_iteration_cap():
@@ -95,8 +97,10 @@ def test_cg_warm_start_and_iteration_cap():
     assert its2 == 2 and not capped.converged and np.all(np.isfinite(x2))
 
 
-@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu"])
-def test_indefinite_matrix_falls_back_to_lu(method):
+@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu", "pardiso"])
+def test_indefinite_matrix_is_solved_by_ldlt_or_lu(method):
+    if method == "pardiso" and not solvers.has_pardiso():
+        pytest.skip("MKL (PARDISO) is not installed here")
     A = grid_laplacian(6, 3, 3, shift=0.0) - 0.7 * sp.eye(162)    # eigenvalues on both sides of 0
     A = A.tocsr()
     w = np.linalg.eigvalsh(A.toarray())
@@ -104,8 +108,12 @@ def test_indefinite_matrix_falls_back_to_lu(method):
     b = np.random.default_rng(3).standard_normal(A.shape[0])
     solver = LinearSolver(method)
     x, _ = solver.solve(A, b)
-    assert solver.last == "lu"
     assert relres(A, x, b) < 1e-10
+    if method == "lu" or not solvers.has_pardiso():
+        assert solver.last == "lu"
+    else:                                          # symmetric indefinite LDL^T, with its inertia
+        assert solver.last == "pardiso64"
+        assert solver.inertia == (int((w > 0).sum()), int((w < 0).sum()))
 
 
 def test_float32_failure_refactors_in_double():
@@ -122,8 +130,10 @@ def test_float32_failure_refactors_in_double():
     assert np.abs(x - x_ref).max() <= 1e-5 * np.abs(x_ref).max()
 
 
-@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu", "cg"])
+@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu", "cg", "amg", "pardiso"])
 def test_nan_is_an_error(method):
+    if method == "pardiso" and not solvers.has_pardiso():
+        pytest.skip("MKL (PARDISO) is not installed here")
     A, b = spd_system()
     b[3] = np.nan
     with pytest.raises(tm.TensormassError, match="NaN"):
@@ -134,8 +144,10 @@ def test_nan_is_an_error(method):
         LinearSolver(method).solve(A2, b2)
 
 
-@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu"])
+@pytest.mark.parametrize("method", ["auto", "direct", "band", "lu", "pardiso"])
 def test_singular_matrix_is_an_error(method):
+    if method == "pardiso" and not solvers.has_pardiso():
+        pytest.skip("MKL (PARDISO) is not installed here")
     A, b = spd_system()
     A = A.tolil()
     A[4, :] = 0.0                                   # a dof with no stiffness at all
@@ -145,12 +157,25 @@ def test_singular_matrix_is_an_error(method):
         LinearSolver(method).solve(A, b)
 
 
-def test_cg_refuses_non_positive_diagonal():
+@pytest.mark.parametrize("method", ["cg", "amg"])
+def test_cg_on_an_indefinite_matrix_falls_back_to_a_direct_solve(method):
     A, b = spd_system()
     A = A.tolil()
-    A[2, 2] = -1.0
-    with pytest.raises(tm.TensormassError, match="positive"):
-        LinearSolver("cg").solve(A.tocsr(), b)
+    A[2, 2] = -1.0                                  # a non-positive diagonal: CG cannot start
+    A = A.tocsr()
+    solver = LinearSolver(method)
+    x, its = solver.solve(A, b)
+    assert relres(A, x, b) < 1e-10 and its == 1
+    assert "not positive definite" in solver.fallback and not solver.last.startswith("cg")
+    # indefinite with a positive diagonal: CG meets negative curvature, then the same fallback
+    B = (grid_laplacian(6, 3, 3, shift=0.0) - 0.7 * sp.eye(162)).tocsr()
+    assert np.all(B.diagonal() > 0)
+    c = np.random.default_rng(3).standard_normal(B.shape[0])
+    solver = LinearSolver("cg")
+    x, _ = solver.solve(B, c)
+    assert relres(B, x, c) < 1e-10 and "not positive definite" in solver.fallback
+    x, _ = solver.solve(*spd_system())              # the next (definite) system: CG again, no note
+    assert solver.fallback is None and solver.last == "cg-ic"
 
 
 def test_zero_rhs_and_bad_arguments():
@@ -175,17 +200,45 @@ def test_band_ordering_finds_the_slices_of_a_shuffled_bar():
     assert kd <= 2 * 9                              # a slice is 9 nodes: natural order gives 13
 
 
-def test_auto_picks_by_the_thresholds(monkeypatch):
-    small, _ = spd_system()                         # below AUTO_DIRECT_BELOW: always direct
+def test_auto_picks_by_the_cost_model(monkeypatch):
+    small, _ = spd_system()                         # below AUTO_DIRECT_BELOW: always the band
     assert small.shape[0] <= solvers.AUTO_DIRECT_BELOW
     assert LinearSolver("auto").choose(small) == "band"
     bar = grid_laplacian(120, 3, 3, shift=1.0)      # long bar: narrow band
     cube = grid_laplacian(12, 12, 12, shift=1.0)    # compact: wide band
     assert min(bar.shape[0], cube.shape[0]) > solvers.AUTO_DIRECT_BELOW
     auto = LinearSolver("auto")
-    plan_bar, plan_cube = auto.plan(bar), LinearSolver().plan(cube)
-    assert plan_bar.work <= solvers.AUTO_BAND_WORK_PER_NNZ * bar.nnz
     assert auto.choose(bar) == "band" and auto.kind_for(bar) == "direct"
+    # fixed methods never change; kind_for on a bare size
+    assert LinearSolver("cg").choose(small) == "cg" and LinearSolver("lu").choose(cube) == "lu"
+    assert LinearSolver("amg").choose(small) == "amg" and LinearSolver("amg").kind_for(cube) == "cg"
+    assert LinearSolver("auto").kind_for(10) == "direct" and LinearSolver("direct").kind_for(10 ** 7) == "direct"
+    assert LinearSolver("cg").kind_for(10) == "cg"
+    if solvers.has_pardiso():
+        # band while its modelled cost is below PARDISO's (analysed only past PARDISO_ANALYSE_ABOVE)
+        pattern = LinearSolver().pattern(cube)
+        band = pattern.band_seconds(cube)
+        factor, solve = pattern.pardiso(cube).costs()
+        expected = "band" if band <= max(solvers.PARDISO_ANALYSE_ABOVE, factor + 3 * solve) else "pardiso"
+        assert LinearSolver("direct").choose(cube) == expected
+        monkeypatch.setattr(solvers, "PARDISO_ANALYSE_ABOVE", 0.0)
+        monkeypatch.setattr(solvers, "PARDISO_FLOPS", 1e30)          # PARDISO modelled free
+        assert LinearSolver("direct").choose(cube) == "pardiso"
+        assert LinearSolver("auto").choose(cube) == "pardiso"
+        monkeypatch.setattr(solvers, "PARDISO_FLOPS", 1.0)           # PARDISO modelled hopeless
+        assert LinearSolver("direct").choose(cube) == "band"
+        monkeypatch.setattr(solvers, "PARDISO_FLOPS", 1e30)
+        monkeypatch.setattr(solvers, "PARDISO_MAX_BYTES", 0)         # its factor too big: multigrid
+        assert LinearSolver("auto").choose(cube) == "amg" and LinearSolver("direct").choose(cube) == "pardiso"
+        monkeypatch.setattr(solvers, "PARDISO_MAX_BYTES", 2 ** 40)
+        monkeypatch.setattr(solvers, "DIRECT_LIMIT", cube.shape[0] - 1)
+        assert LinearSolver("auto").choose(cube) == "amg"
+
+
+def test_without_mkl_the_band_and_cg_rules_apply(monkeypatch):
+    monkeypatch.setattr(solvers.pardiso, "available", lambda: False)
+    cube = grid_laplacian(12, 12, 12, shift=1.0)
+    plan_cube = LinearSolver().plan(cube)
     # the rule: band while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz
     monkeypatch.setattr(solvers, "AUTO_BAND_WORK_PER_NNZ", 0.99 * plan_cube.work / cube.nnz)
     assert LinearSolver("auto").choose(cube) == "cg"
@@ -194,17 +247,8 @@ def test_auto_picks_by_the_thresholds(monkeypatch):
     monkeypatch.setattr(solvers, "BAND_MAX_ENTRIES", plan_cube.entries - 1)
     assert LinearSolver("auto").choose(cube) == "cg"
     assert LinearSolver("direct").choose(cube) == "lu"  # too big a band for "direct": SuperLU
-    # fixed methods never change; kind_for on a bare size
-    assert LinearSolver("cg").choose(small) == "cg" and LinearSolver("lu").choose(cube) == "lu"
-    assert LinearSolver("auto").kind_for(10) == "direct" and LinearSolver("direct").kind_for(10 ** 7) == "direct"
-    assert LinearSolver("cg").kind_for(10) == "cg"
-
-
-def test_direct_prefers_cholmod_for_wide_bands(monkeypatch):
-    cube = grid_laplacian(6, 6, 6, shift=1.0)
-    monkeypatch.setattr(solvers, "DIRECT_BAND_WORK_CHOLMOD", 0.0)
-    expected = "cholmod" if solvers.has_cholmod() else "band"
-    assert LinearSolver("direct").choose(cube) == expected
+    with pytest.raises(tm.TensormassError, match="pardiso.*unavailable"):
+        LinearSolver("pardiso")
 
 
 def test_band_factor_reuse():
