@@ -67,6 +67,10 @@ def _load():
     if _lib is not None or _why is not None:
         return _lib
     errors = []
+    # Intel OpenMP spins 200 ms after each parallel region by default: on shared cores that
+    # spinning thread steals the core the assembly runs on next.  Read when MKL starts its
+    # threads, so set before the first call (a user's own setting wins).
+    os.environ.setdefault("KMP_BLOCKTIME", "0")
     for path in _candidates():
         try:
             lib = ctypes.CDLL(path)
@@ -120,7 +124,7 @@ class Pardiso:
         self.indices = np.ascontiguousarray(indices, dtype=np.int32)
         self.single = bool(single)
         self.dtype = np.float32 if single else np.float64
-        self.threads = max(1, int(threads))
+        self._threads = max(1, int(threads))             # fixed for the handle's lifetime (see threads)
         self.mtype = -2
         self.pt = np.zeros(64, dtype=np.int64)            # opaque handle: never moved or copied
         self.iparm = np.zeros(64, dtype=np.int32)
@@ -135,13 +139,19 @@ class Pardiso:
         self.analysed = False
         self.factored = False
 
+    @property
+    def threads(self) -> int:
+        """OpenMP threads of every phase of this handle: fixed at construction (an analysis on
+        two threads followed by a factorisation on one crashed MKL 2026.2)."""
+        return self._threads
+
     # -- the phases --------------------------------------------------------------------------
     def _call(self, phase: int, values=None, b=None, x=None, what="solve"):
         lib = self._lib
         err = ctypes.c_int32(0)
         one = ctypes.c_int32(1)
         null = ctypes.c_void_p(0)
-        previous = lib.MKL_Set_Num_Threads_Local(self.threads)
+        previous = lib.MKL_Set_Num_Threads_Local(self._threads)
         try:
             lib.pardiso(self.pt.ctypes.data_as(ctypes.c_void_p), ctypes.byref(one), ctypes.byref(one),
                         ctypes.byref(ctypes.c_int32(self.mtype)), ctypes.byref(ctypes.c_int32(phase)),

@@ -78,6 +78,12 @@ PARDISO_FLOPS = 30e9                 # single-precision factor rate (double: hal
 PARDISO_OVERHEAD = 2e-3
 PARDISO_SOLVE_PER_ENTRY = 2.2e-9     # per factor entry, single precision (double: 1.5x)
 PARDISO_MAX_BYTES = 8 * 2**30        # "auto" takes multigrid past this factor memory
+# Smaller systems factor on one thread: on 2 shared cores a second OpenMP thread made the
+# 9 819-dof organ's 1.3 Gflop factor slower (40 -> 77 ms idle, 0.10 -> 0.18 s loaded); the
+# 34 434-dof one's 18 Gflop ran 2.4x faster.  Decided from the size before the analysis: a
+# handle keeps one thread count (analysing on two threads and factoring on one crashed MKL
+# 2026.2 on an implicit Euler matrix).  Bits do not depend on it (MKL's reproducible mode).
+PARDISO_PARALLEL_DOFS = 15_000
 AMG_SECONDS_PER_NNZ = 4e-7 + 40 * 2.5e-8
 # Without MKL: "auto" takes the band Cholesky while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz,
 # IC(0)-CG beyond (the rule of session 3: CG-IC(0) costs about nnz x 1.2-1.7e-7 s).
@@ -180,10 +186,12 @@ class _PardisoPlan:
 
     def handle(self, single: bool) -> pardiso.Pardiso:
         if single not in self.handles:
-            h = pardiso.Pardiso(self.n, self.indptr, self.indices, single=single, threads=_worker_threads())
+            threads = _worker_threads() if self.n >= PARDISO_PARALLEL_DOFS else 1
+            h = pardiso.Pardiso(self.n, self.indptr, self.indices, single=single, threads=threads)
             h.analyse()
             self.handles[single] = h
         return self.handles[single]
+
 
     def costs(self, single: bool = True) -> tuple[float, float]:
         return pardiso_costs(self.stats["factor_flops"], self.stats["factor_nnz"], single)
@@ -199,7 +207,6 @@ class _PardisoFactor:
         self.reuse_cap = reuse_iterations(*plan.costs(single))
 
     def factor(self, A) -> tuple[int, int]:
-        self.handle.threads = _worker_threads()
         self.handle.factor(A.data[self.plan.upper])
         return self.handle.inertia
 

@@ -103,7 +103,7 @@ def test_reuse_cap_comes_from_the_pattern():
         A, b = spd_system(0, shape=shape)
         solver = LinearSolver("band")
         solver.solve(A, b)
-        plan, factor = solver._plan, solver._factor
+        plan, factor = solver.plan(A), solver._factor
         assert factor.reuse_cap == solvers.reuse_cap(plan.n, plan.kd, plan.nnz, np.dtype(factor.dtype).itemsize)
         caps.append(factor.reuse_cap)
     assert 3 <= caps[0] < caps[1] <= 20, caps

@@ -176,3 +176,8 @@ def test_whole_runs_agree_with_the_band_solver(linear):
     u_ref, u = ref.displacement, run.displacement
     assert np.abs(u_ref).max() > 1e-4
     assert np.abs(u - u_ref).max() <= 1e-7 * np.abs(u_ref).max()
+
+
+def test_scene_solver_names_are_the_runtime_methods():
+    from tensormass.runtime.scene import LINEAR_SOLVERS
+    assert LINEAR_SOLVERS == solvers.METHODS

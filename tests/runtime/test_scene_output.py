@@ -249,7 +249,7 @@ CASES = [
     (_set(["solver", "dt"], -0.01), r"^solver\.dt: must be > 0"),
     (_set(["solver", "steps"], 0), r"^solver\.steps: must be >= 1 \(got 0\)"),
     (_set(["solver", "kind"], "rk4"), r"^solver\.kind: unknown value 'rk4'; allowed: static, implicit_euler, backward_euler, explicit"),
-    (_set(["solver", "linear"], "lu"), r"^solver\.linear: unknown value 'lu'; allowed: auto, direct, cg"),
+    (_set(["solver", "linear"], "qr"), r"^solver\.linear: unknown value 'qr'; allowed: auto, direct, cg, amg, band, pardiso, lu"),
     (_set(["solver", "backend"], "cuda"), r"^solver\.backend: unknown value 'cuda'; allowed: numba, c"),
     (_set(["solver", "rayleigh"], [0.1]), r"^solver\.rayleigh: expected \[alpha, beta\]"),
     (_set(["solver", "rayleigh"], [-0.1, 0.0]), r"^solver\.rayleigh\[0\]: must be >= 0"),
