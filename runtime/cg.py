@@ -33,6 +33,13 @@ def reuse_iterations(factor_seconds: float, iteration_seconds: float) -> int:
 
 
 def refine(A, b, M, exact, max_iterations):
+    """CG on A x = b preconditioned by M ~ A^-1 (see _refine); overflow on a singular matrix is
+    expected there (the caller checks the result), not worth a warning."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _refine(A, b, M, exact, max_iterations)
+
+
+def _refine(A, b, M, exact, max_iterations):
     """CG on A x = b preconditioned by M ~ A^-1, from x = M b, to DIRECT_TOL.
 
     exact (M is a float64 factor of A): the first iterate is already a direct
