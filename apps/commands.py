@@ -313,6 +313,8 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
                              f"total {_fmt_seconds(total)}"))
     it = data.get("iterations") or {}
     rows.append(("iterations", f"Newton {it.get('newton', '?')}, linear (CG / solves) {it.get('linear', '?')}"))
+    if it.get("linear_solvers"):
+        rows.append(("linear solver", ", ".join(f"{name} x{n}" for name, n in it["linear_solvers"].items())))
     energy = data.get("energy")
     rows.append(("final energy", f"{energy:.6g} J (elastic)" if isinstance(energy, (int, float)) else "n/a"))
     for name, u in (data.get("probes") or {}).items():

@@ -54,6 +54,7 @@ def _refine(A, b, M, exact, max_iterations):
     if not np.isfinite(res):
         return None
     best, best_res = x, res
+    res0 = res
     z = M(r)
     p = z.copy()
     rz = r @ z
@@ -74,6 +75,8 @@ def _refine(A, b, M, exact, max_iterations):
             break                                    # round-off level reached
         if res <= DIRECT_TOL * bnorm:
             break
+        if not exact and its >= 2 and _hopeless(res0, res, its, DIRECT_TOL * bnorm, max_iterations):
+            return None                              # a kept factor too far from A: refactor now
         z = M(r)
         rz_new = r @ z
         p = z + (rz_new / rz) * p
@@ -85,6 +88,15 @@ def _refine(A, b, M, exact, max_iterations):
     return best, its
 
 
+def _hopeless(res0, res, its, target, max_iterations) -> bool:
+    """Whether the mean contraction so far reaches the target residual within the budget: a
+    kept factor that does not is dropped after two iterations instead of max_iterations (the
+    same numbers give the same answer: no timing involved)."""
+    if res >= res0:
+        return True
+    rate = (res / res0) ** (1.0 / its)
+    needed = np.log(target / res) / np.log(rate)
+    return its + needed > max_iterations
 
 
 @njit(cache=True)

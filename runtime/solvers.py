@@ -247,6 +247,7 @@ class LinearSolver:
         self.last = None
         self.fallback = None                     # why the last solve left the chosen solver, if it did
         self.inertia = None                      # (positive, negative) pivots of the last PARDISO factor
+        self.counts = {}                         # solves per `last` value (reported by runs)
         self.reuse = bool(reuse)
         self.near_nullspace = None
         self._pattern = None
@@ -343,6 +344,8 @@ class LinearSolver:
             if not np.all(np.isfinite(x)):
                 raise TensormassError("linear solve produced NaN/Inf: the system matrix is singular or "
                                       "badly conditioned (is every rigid motion fixed? inverted elements?)")
+            key = self.last if self.fallback is None else f"{self.last} (after {kind} broke down)"
+            self.counts[key] = self.counts.get(key, 0) + 1
             return x, its
         finally:
             self.time += time.perf_counter() - start
