@@ -12,7 +12,7 @@ from tensormass.runtime import mesh as mesh_module
 from tensormass.runtime import resources
 from tensormass.runtime.mesh import bar_counts, generate_bar, to_meshio
 from tensormass.runtime.resources import MeshCounts, ResourceError, estimate, limit_bytes, parse_size
-from tensormass.runtime.scene import Scene
+from tensormass.runtime.scene import Scene, Solver
 
 GiB = 2 ** 30
 
@@ -114,7 +114,26 @@ def test_constants_mirror_the_runtime():
     assert resources.DIRECT_LIMIT == solvers.DIRECT_LIMIT
     assert resources.AUTO_BAND_WORK_PER_NNZ == solvers.AUTO_BAND_WORK_PER_NNZ
     assert resources.BAND_MAX_ENTRIES == solvers.BAND_MAX_ENTRIES
+    assert resources.PARDISO_ANALYSE_ABOVE == solvers.PARDISO_ANALYSE_ABOVE
+    assert resources.PARDISO_FLOPS == solvers.PARDISO_FLOPS
     assert resources.HISTORY_ROWS >= simulation.HISTORY_MAX
+
+
+def test_compact_bodies_are_estimated_with_pardiso_when_mkl_is_there(monkeypatch):
+    """A compact body past the band's sweet spot: the estimate counts a nested-dissection factor
+    (~12 bytes x 18 n^(4/3)), far below the band's n kd; without MKL, the band as before."""
+    from tensormass.runtime import pardiso
+    _mkl = pardiso.available()
+    counts = resources.MeshCounts(dim=3, nodes=31 ** 3, cells={"tetra": 6 * 30 ** 3}, layers=30.0)
+    est = resources.estimate(counts, materials=[], solver=Solver(kind="static"))
+    direct = resources.estimate(counts, materials=[], solver=Solver(kind="static", linear="direct"))
+    if pardiso.available():
+        assert est.band == 0 and direct.band == 0 and direct.bytes == est.bytes
+    monkeypatch.setattr(pardiso, "available", lambda: False)
+    band = resources.estimate(counts, materials=[], solver=Solver(kind="static", linear="direct"))
+    assert band.band > 0
+    if _mkl:                                       # the band factor (n kd) outweighs nested dissection
+        assert band.bytes > direct.bytes
 
 
 # ------------------------------------------------------------------------------ refusals
