@@ -89,14 +89,15 @@ def _refine(A, b, M, exact, max_iterations):
 
 
 def _hopeless(res0, res, its, target, max_iterations) -> bool:
-    """Whether the mean contraction so far reaches the target residual within the budget: a
-    kept factor that does not is dropped after two iterations instead of max_iterations (the
-    same numbers give the same answer: no timing involved)."""
+    """Whether the mean contraction so far misses the target residual by far (twice the budget):
+    a kept factor that clearly will not do is dropped after two iterations instead of
+    max_iterations; a borderline one gets its whole budget (the same numbers give the same
+    answer: no timing involved)."""
     if res >= res0:
         return True
     rate = (res / res0) ** (1.0 / its)
     needed = np.log(target / res) / np.log(rate)
-    return its + needed > max_iterations
+    return its + needed > 2.0 * max_iterations
 
 
 @njit(cache=True)
