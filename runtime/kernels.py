@@ -3,6 +3,7 @@
     k = load_kernel("tetra", "stvk", "gauss1", backend="numba")
     D = k.constants(X, E=1e6, nu=0.3)      # per-element constants, once
     f, K = k.forces_and_stiffness(D, u)    # every step
+    k.forces_and_stiffness_scatter(D, U, cells, pos, f_global, data)   # fused: straight into CSR values
 
 A kernel comes from the committed catalogue (tensormass.generated); a
 combination that is not there (a new law file, another rule) is generated on
