@@ -119,3 +119,10 @@ def test_fused_refuses_bad_inputs_and_flags_inverted_elements(backend):
     with pytest.raises(tm.InvertedElementError) as info:
         k.forces_and_stiffness_scatter(D, V, cells, pos, f, data)
     assert 2 in list(info.value.elements)
+
+
+def test_numba_kernels_release_the_gil():
+    """Every generated numba function is compiled nogil (the runtime may run them in threads)."""
+    module = tm.load_kernel("tetra", "neohookean", "gauss1", backend="numba").module
+    for name in ("constants", "energy", "forces", "stiffness", "forces_and_stiffness", "forces_and_stiffness_scatter"):
+        assert getattr(module, name).targetoptions.get("nogil") is True, name
