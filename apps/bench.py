@@ -36,6 +36,7 @@ from ..runtime.errors import TensormassError
 from ..runtime.kernels import BACKENDS, kernel_source, load_kernel, load_recompute_kernel
 from ..runtime.output import write_json_atomic
 from ..runtime.samples import random_elements
+from .bench_assembly import add_assembly_command
 from .bench_integrators import add_integrators_command
 from .bench_steps import add_steps_command
 from .classic import LAWS, load_classic
@@ -484,6 +485,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
 
     add_steps_command(sub)
     add_integrators_command(sub)
+    add_assembly_command(sub)
     return bench
 
 

@@ -16,8 +16,10 @@ METADATA_KEYS = (
     "parameters", "requires_positive_J", "recompute", "ops", "templates",
 )
 
-# The five entry points every loaded kernel provides (signatures: see the templates).
-KERNEL_FUNCTIONS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")
+# The entry points every loaded kernel provides (signatures: see the templates);
+# forces_and_stiffness_scatter is the fused evaluation and scatter into global arrays.
+KERNEL_FUNCTIONS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness",
+                    "forces_and_stiffness_scatter")
 
 
 class BackendError(Exception):

@@ -5,7 +5,8 @@ of a loop over elements, given here as statements over sympy expressions:
 
     Loop(var, start, stop, body)       for var in [start, stop)
     Declare(name, value)               a new local (mutable when it is accumulated later;
-                                       uniform when it is the same for every element: a table value)
+                                       uniform when it is the same for every element: a table value;
+                                       integer: an index, e.g. a node id read from cells)
     Assign(target, value)              target = value
     Accumulate(target, value, sign)    target += value (sign -1: -=)
     Flag(value, flag, leave)           if not (value > 0): flags = flag (and leave the point loop)
@@ -13,8 +14,18 @@ of a loop over elements, given here as statements over sympy expressions:
     Comment(text)
 
 Array elements are Ref(array, index, ...) sympy functions over the loop variables; the arrays
-are the kernel arguments of the current element (X, params, D, u, f, K, out) and the tables
-(DN, WEIGHTS, and the per-call scratch Gq of recompute kernels). A backend's printer prints the
+are the kernel arguments of the current element (X, params, D, u, f, K, out, and cells, pos of the
+fused kernel), the global arrays of the fused kernel (U: nodal displacements (n_points, dim),
+fg: global forces, data: global CSR values), the tables (DN, WEIGHTS) and per-call scratch
+(Gq of recompute kernels; ul, fl, Kl: one element's u, f and K in the fused kernel).
+
+forces_and_stiffness_scatter (the fused evaluation and scatter) is forces_and_stiffness with
+u gathered from U through cells into the one-element scratch ul, f and K computed into the
+scratch fl and Kl, then added into fg (dof = node * dim + component) and data (pos[e, r, j]:
+the CSR index of row dof r, first column dof of node j: a node's dofs are consecutive in a
+CSR row, so the dim entries of a node block are data[pos[e, r, j] + c]). Elements are added
+one after the other in element order with the same values as the element-buffer path, so
+the result is bit-identical to forces_and_stiffness followed by a serial scatter. A backend's printer prints the
 statements in its language (the C vector variant prints the same tree on 4 elements at once);
 templates only lay out the functions around them.
 """
@@ -57,6 +68,7 @@ class Declare:
     value: sp.Expr
     mutable: bool = False
     uniform: bool = False
+    integer: bool = False
 
 
 @dataclass(frozen=True)
@@ -94,9 +106,12 @@ class FlagIf:
     flag: int
 
 
-KINDS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness")
+KINDS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness", "forces_and_stiffness_scatter")
 LAW_VARIANT = {"energy": "energy", "forces": "gradient", "stiffness": "tangent",
-               "forces_and_stiffness": "gradient_tangent"}
+               "forces_and_stiffness": "gradient_tangent", "forces_and_stiffness_scatter": "gradient_tangent"}
+# The arrays u, f, K of each kernel: the element's rows of the arguments, or (fused) one-element scratch.
+ARRAYS = {"u": "u", "f": "f", "K": "K"}
+FUSED_ARRAYS = {"u": "ul", "f": "fl", "K": "Kl"}
 
 
 def _s(name: str) -> sp.Symbol:
@@ -111,7 +126,8 @@ def ref(array: str, *indices) -> Ref:
     return Ref(sp.Symbol(array), *[sp.sympify(i) for i in indices])
 
 
-q, i, j, r, s = (_i(n) for n in "qijrs")
+q, i, j, r, s, c_ = (_i(n) for n in ("q", "i", "j", "r", "s", "c"))
+node, base = _i("node"), _i("base")
 
 
 class _Builder:
@@ -121,6 +137,11 @@ class _Builder:
         self.ir = ir
         self.dim, self.n = ir.dim, ir.n_nodes
         self.n_dofs = ir.n_dofs
+        self.names = ARRAYS
+
+    def arr(self, name, *indices):
+        """Element of u, f or K of the kernel being built (argument rows or fused scratch)."""
+        return ref(self.names[name], *indices)
 
     # -- pieces -------------------------------------------------------------------------------
     def G(self, node, b):
@@ -156,7 +177,7 @@ class _Builder:
             out.append(Declare("v", ref("D", q * ir.point_stride)))
         out += [Declare(f"F{a}{b}", sp.Integer(1 if a == b else 0), mutable=True) for a in range(d) for b in range(d)]
         body = [Declare(f"gi{b}", self.G(i, b)) for b in range(d)]
-        body += [Declare(f"u{a}", ref("u", i, a)) for a in range(d)]
+        body += [Declare(f"u{a}", self.arr("u", i, a)) for a in range(d)]
         body += [Accumulate(_s(f"F{a}{b}"), _s(f"u{a}") * _s(f"gi{b}")) for a in range(d) for b in range(d)]
         out.append(Loop("i", 0, self.n, tuple(body)))
         if ir.J is not None:
@@ -178,28 +199,43 @@ class _Builder:
     def add_forces(self):
         d = self.dim
         body = [Declare(f"gi{b}", self.G(i, b)) for b in range(d)]
-        body += [Accumulate(ref("f", i * d + a), e, -1) for a, e in self.ir.chain["forces"]]
+        body += [Accumulate(self.arr("f", i * d + a), e, -1) for a, e in self.ir.chain["forces"]]
         return [Loop("i", 0, self.n, tuple(body))]
 
     def add_stiffness(self):
         d = self.dim
         inner = [Declare(f"gj{b}", self.G(j, b)) for b in range(d)]
-        inner += [Accumulate(ref("K", i * d + a, j * d + c), e) for a, c, e in self.ir.chain["K"]]
+        inner += [Accumulate(self.arr("K", i * d + a, j * d + c), e) for a, c, e in self.ir.chain["K"]]
         body = [Declare(f"gi{b}", self.G(i, b)) for b in range(d)]
         body += [Declare(name, e) for name, e in self.ir.chain["H"]]
         body.append(Loop("j", i, self.n, tuple(inner)))
         return [Loop("i", 0, self.n, tuple(body))]
 
     def zero_forces(self):
-        return [Loop("r", 0, self.n_dofs, (Assign(ref("f", r), sp.Integer(0)),))]
+        return [Loop("r", 0, self.n_dofs, (Assign(self.arr("f", r), sp.Integer(0)),))]
 
     def zero_stiffness(self):
-        return [Loop("r", 0, self.n_dofs, (Loop("s", 0, self.n_dofs, (Assign(ref("K", r, s), sp.Integer(0)),)),))]
+        return [Loop("r", 0, self.n_dofs, (Loop("s", 0, self.n_dofs, (Assign(self.arr("K", r, s), sp.Integer(0)),)),))]
 
     def mirror_stiffness(self):
         return [Comment("Only node blocks j >= i were accumulated: copy them below the diagonal."),
                 Loop("r", 0, self.n_dofs, (Loop("s", 0, IntDiv(r, self.dim) * self.dim,
-                                                 (Assign(ref("K", r, s), ref("K", s, r)),)),))]
+                                                 (Assign(self.arr("K", r, s), self.arr("K", s, r)),)),))]
+
+    def gather_u(self):
+        """ul[i, a] = U[cells[e, i], a]: the element's displacements read from the global array."""
+        return [Loop("i", 0, self.n, (Declare("node", ref("cells", i), integer=True),)
+                     + tuple(Assign(ref("ul", i, a), ref("U", node, a)) for a in range(self.dim)))]
+
+    def scatter(self):
+        """fl into fg, then Kl into data node block by node block, through cells and pos."""
+        d = self.dim
+        forces = Loop("i", 0, self.n, (Declare("node", ref("cells", i), integer=True),)
+                      + tuple(Accumulate(ref("fg", node * d + a), ref("fl", i * d + a)) for a in range(d)))
+        blocks = Loop("r", 0, self.n_dofs, (Loop("j", 0, self.n, (
+            Declare("base", ref("pos", r, j), integer=True),
+            Loop("c", 0, d, (Accumulate(ref("data", base + c_), ref("Kl", r, j * d + c_)),)))),))
+        return [Comment("Add the element into the global forces and CSR values (element order)."), forces, blocks]
 
     # -- kernels ------------------------------------------------------------------------------
     def constants(self):
@@ -237,6 +273,12 @@ class _Builder:
     def kernel(self, kind):
         if kind == "constants":
             return self.constants()
+        if kind == "forces_and_stiffness_scatter":
+            self.names = FUSED_ARRAYS
+            try:
+                return tuple(self.gather_u()) + self.kernel("forces_and_stiffness") + tuple(self.scatter())
+            finally:
+                self.names = ARRAYS
         out = []
         if kind in ("forces", "forces_and_stiffness"):
             out += self.zero_forces()

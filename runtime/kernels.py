@@ -3,6 +3,7 @@
     k = load_kernel("tetra", "stvk", "gauss1", backend="numba")
     D = k.constants(X, E=1e6, nu=0.3)      # per-element constants, once
     f, K = k.forces_and_stiffness(D, u)    # every step
+    k.forces_and_stiffness_scatter(D, U, cells, pos, f_global, data)   # fused: straight into CSR values
 
 A kernel comes from the committed catalogue (tensormass.generated); a
 combination that is not there (a new law file, another rule) is generated on
@@ -159,6 +160,57 @@ class Kernel:
         self.module.forces_and_stiffness(D, u, f, K, flags)
         self._check(flags, "forces_and_stiffness")
         return f, K
+
+    def forces_and_stiffness_scatter(self, D, U, cells, pos, f, data, flags=None, check: bool = True) -> None:
+        """Fused evaluation and scatter: f += the element forces, data += the element stiffness
+        (CSR values), element after element, with no per-element output arrays.
+
+        D (n_elem, n_constants); U (n_points, dofs_per_node) global displacements (or flat),
+        read through cells (n_elem, n_nodes) int64 node ids; pos (n_elem, n_dofs, n_nodes) int32
+        from runtime.fused.block_positions (CSR index of row dof r, first dof of node j);
+        f (U.size,) and data (nnz,) float64, contiguous, added to in place. flags: optional
+        (n_elem,) int32 work array. check=False skips the index range checks of cells and pos
+        (a caller that checked them once). Bit-identical to forces_and_stiffness followed by
+        runtime.assembly's serial scatter."""
+        n_elem = len(D)
+        D = np.ascontiguousarray(D, dtype=np.float64)
+        if D.ndim != 2 or D.shape[1] != self.n_constants:
+            raise TensormassError(f"{self}: constants must have shape (n_elem, {self.n_constants}), got {D.shape}")
+        U = np.ascontiguousarray(U, dtype=np.float64)
+        if U.size % self.dofs_per_node:
+            raise TensormassError(f"{self}: U must have shape (n_points, {self.dofs_per_node}), got {U.shape}")
+        U = U.reshape(-1, self.dofs_per_node)
+        if not np.all(np.isfinite(U)):
+            raise TensormassError("displacements contain NaN or Inf at node(s) "
+                                  + ", ".join(map(str, np.flatnonzero(~np.isfinite(U).all(axis=1))[:10])))
+        cells = self._index_array(cells, np.int64, (n_elem, self.n_nodes), "cells")
+        pos = self._index_array(pos, np.int32, (n_elem, self.n_dofs, self.n_nodes), "pos")
+        for name, out, size in (("f", f, U.size), ("data", data, None)):
+            if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.ndim == 1
+                    and out.flags.c_contiguous and out.flags.writeable):
+                raise TensormassError(f"{self}: {name} must be a writable contiguous 1D float64 array")
+            if size is not None and out.size != size:
+                raise TensormassError(f"{self}: f must have {size} entries (U.size), got {out.size}")
+        if check and n_elem:
+            if cells.min() < 0 or cells.max() >= len(U):
+                raise TensormassError(f"{self}: cells hold node ids outside 0..{len(U) - 1}")
+            if pos.min() < 0 or pos.max() > data.size - self.dofs_per_node:
+                raise TensormassError(f"{self}: pos holds CSR indices outside the {data.size} values of data")
+        if flags is None:
+            flags = np.zeros(n_elem, dtype=np.int32)
+        elif not (isinstance(flags, np.ndarray) and flags.dtype == np.int32 and flags.shape == (n_elem,)
+                  and flags.flags.c_contiguous and flags.flags.writeable):
+            raise TensormassError(f"{self}: flags must be a writable contiguous int32 array of shape ({n_elem},)")
+        self.module.forces_and_stiffness_scatter(D, U, cells, pos, f, data, flags)
+        self._check(flags, "forces_and_stiffness_scatter")
+
+    def _index_array(self, a, dtype, shape, name):
+        a = np.asarray(a)
+        if a.shape != shape or not np.issubdtype(a.dtype, np.integer):
+            raise TensormassError(f"{self}: {name} must be an integer array of shape {shape}, got {a.dtype} {a.shape}")
+        if a.dtype != dtype and a.size and (a.max() > np.iinfo(dtype).max or a.min() < np.iinfo(dtype).min):
+            raise TensormassError(f"{self}: {name} holds values that do not fit {np.dtype(dtype).name}")
+        return np.ascontiguousarray(a, dtype=dtype)
 
     def min_det_F(self, D, u, cells=None) -> np.ndarray:
         """Smallest det F over the integration points of each element (any law).

@@ -247,6 +247,8 @@ void {prefix}_energy(long n, const double *D, const double *u, double *out, int 
 void {prefix}_forces(long n, const double *D, const double *u, double *f, int *flags);
 void {prefix}_stiffness(long n, const double *D, const double *u, double *K, int *flags);
 void {prefix}_forces_and_stiffness(long n, const double *D, const double *u, double *f, double *K, int *flags);
+void {prefix}_forces_and_stiffness_scatter(long n, const double *D, const double *U, const long *cells,
+    const int *pos, double *fg, double *data, int *flags);
 """
 
 
@@ -315,6 +317,22 @@ class CModule:
         self._functions["forces_and_stiffness"](
             n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
             self._double(f, self._n_dofs, n, "f", True), self._double(K, self._n_dofs ** 2, n, "K", True),
+            self._flags(flags, n))
+
+
+    def forces_and_stiffness_scatter(self, D, U, cells, pos, fg, data, flags):
+        """The fused evaluation and scatter (see the C template): U (n_points, dim) float64,
+        cells (n, n_nodes) int64, pos (n, n_dofs, n_nodes) int32, fg (U.size,), data (nnz,).
+        Only types and sizes are checked here; the Kernel API checks index ranges."""
+        n = len(D)
+        n_nodes = self._n_dofs // int(self.METADATA["dofs_per_node"])
+        if U.size != fg.size:
+            raise BackendError(f"{self.NAME}: fg has {fg.size} values, U {U.size}: they must match")
+        self._functions["forces_and_stiffness_scatter"](
+            n, self._double(D, self._n_constants, n, "D"), self._double(U, U.size, 1, "U"),
+            self._pointer(cells, "long", np.int64, n_nodes, n, "cells", False),
+            self._pointer(pos, "int", np.int32, self._n_dofs * n_nodes, n, "pos", False),
+            self._double(fg, fg.size, 1, "fg", True), self._double(data, data.size, 1, "data", True),
             self._flags(flags, n))
 
 

@@ -73,7 +73,11 @@ class CStatements(StatementPrinter):
         # array -> (pointer name, row lengths for flattening; None: a C multi-dimensional table)
         self.arrays = {"X": ("Xe", (d,)), "params": ("pe", ()), "D": ("De", ()), "u": ("ue", (d,)),
                        "f": ("fe", ()), "K": ("Ke", (n_dofs,)), "Gq": ("Gq", (d,)), "out": ("out", ()),
-                       "DN": ("DN", None), "WEIGHTS": ("WEIGHTS", None)}
+                       "DN": ("DN", None), "WEIGHTS": ("WEIGHTS", None),
+                       # the fused kernel: element rows of cells and pos, global arrays, scratch
+                       "cells": ("ce", ()), "pos": ("Pe", (ir.n_nodes,)), "U": ("U", (d,)),
+                       "fg": ("fg", ()), "data": ("data", ()),
+                       "ul": ("ul", (d,)), "fl": ("fl", ()), "Kl": ("Kl", (n_dofs,))}
 
     def ref(self, array, indices):
         name, rows = self.arrays[array]
@@ -91,6 +95,8 @@ class CStatements(StatementPrinter):
         return f"{name}[{self.idx(sp.expand(flat))}]"
 
     def declare(self, st):
+        if st.integer:
+            return f"const long {st.name} = {self.code(st.value)}"
         kind = "double" if st.uniform else self.value_type
         return f"{'' if st.mutable else 'const '}{kind} {st.name} = {self.code(st.value)}"
 

@@ -62,3 +62,31 @@ def test_inverted_element_inside_a_vector_block(law):
     assert list(gn) == list(gc) == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0]
     ok = gn == 0
     assert relative_error(fc[ok], fn[ok]) < 1e-12 and relative_error(Kc[ok], Kn[ok]) < 1e-12
+
+
+@pytest.mark.parametrize("entry", SELECTED, ids=[e.name for e in SELECTED])
+def test_fused_scatter_c_equals_numba(entry):
+    """forces_and_stiffness_scatter: C (vector blocks, scalar remainder) = numba, on elements that
+    share nodes (so several elements add into the same global entries)."""
+    from tensormass.runtime.assembly import SparsePattern
+    from tensormass.runtime.dofs import node_dofs
+    from tensormass.runtime.fused import block_positions
+    numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
+    c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
+    n, k, d = 11, numba.n_nodes, numba.dim                                # 2 blocks of 4 + 3
+    X = random_elements(entry.element, n, seed=4, straight=entry.quadrature == "exact")
+    D = numba.constants(X, E=2.0, nu=0.3)
+    rng = np.random.default_rng(5)
+    n_points = 2 * k
+    cells = np.array([rng.permutation(n_points)[:k] for _ in range(n)], dtype=np.int64)   # shared nodes
+    pattern = SparsePattern([node_dofs(cells, d)], n_points * d)
+    pos = block_positions(pattern.positions[0], d)
+    U = 0.04 * rng.standard_normal((n_points, d))
+    results = []
+    for kernel in (numba, c):
+        f, data = np.zeros(n_points * d), np.zeros(pattern.nnz)
+        kernel.forces_and_stiffness_scatter(D, U, cells, pos, f, data)
+        results.append((f, data))
+    (fn, dn), (fc, dc) = results
+    assert np.abs(dn).max() > 0
+    assert relative_error(fc, fn) < 1e-12 and relative_error(dc, dn) < 1e-12
