@@ -404,8 +404,8 @@ def _subprocess(role: str, spec: dict, threads: int | None, timeout: float) -> d
 def _memory_note(text: str, method: str) -> str | None:
     """A note when the run's memory estimate exceeds what the machine can give (runtime.resources)."""
     from ..runtime import resources
-    scene = make_scene(text, method)
     try:
+        scene = make_scene(text, method)          # reading the scene checks the estimate already
         resources.check(resources.estimate(scene), None, what="this case")
     except resources.ResourceError as error:
         return str(error)
@@ -585,6 +585,10 @@ def format_organ_report(report: dict) -> str:
             "total: wall time of the run, setup included; ms/it: (total - setup) / Newton iterations (static), "
             "ms per implicit step after the first (dynamic); FElupe/ours: FElupe's Newton time over ours "
             "(setup excluded on both sides); peak MB: the process's peak resident memory."]
+    used = [r.get("threads_in_use") for e in report["cases"] for r in e["runs"] if r.get("threads_in_use")]
+    if used and all(t.get("runtime") is None for t in used):
+        notes.append("this runtime has no thread switch (runtime.parallel): TENSORMASS_THREADS was ignored, "
+                     f"numba ran with {sorted({t['numba'] for t in used})} thread(s) in every run")
     if notes:
         out += [""] + notes
     return "\n".join(out)
