@@ -545,7 +545,7 @@ def format_organ_report(report: dict) -> str:
     for name, why in s["skipped_solvers"].items():
         out.append(f"solver {name} skipped: {why}")
     rows = [("case", "solver (used)", "thr", "dofs", "total s", "setup s", "Newton", "assembly s", "solve s",
-             "ms/it or /step", "peak MB", "FElupe/ours", "probe diff")]
+             "ms/it or /step", "peak MB", "FElupe/ours", "per it", "probe diff")]
     notes = []
     for entry in report["cases"]:
         if entry["skipped"]:
@@ -556,7 +556,7 @@ def format_organ_report(report: dict) -> str:
             label = f"{r['method']} ({r.get('used') or '-'})"
             if r.get("total_s") is None:
                 rows.append((entry["case"], label, r["threads"], "-", r.get("status"), "-", "-", "-", "-", "-",
-                             "-", "-", "-"))
+                             "-", "-", "-", "-"))
                 notes.append(f"{entry['case']} {r['method']} {r['threads']} thread(s): {r.get('message')}")
                 continue
             per = r["later_steps_ms"] if dynamic else r["per_iteration_ms"]
@@ -564,13 +564,14 @@ def format_organ_report(report: dict) -> str:
                          r["newton"], _s(r["assembly_s"]), _s(r["solve_s"]), _ms(per),
                          "-" if r["peak_mb"] is None else f"{r['peak_mb']:.0f}",
                          "-" if r.get("felupe_ratio") is None else f"{r['felupe_ratio']:.1f}x",
+                         "-" if r.get("felupe_ratio_per_iteration") is None else f"{r['felupe_ratio_per_iteration']:.1f}x",
                          "-" if r.get("probe_difference") is None else f"{r['probe_difference']:.1e}"))
         fe = entry.get("felupe")
         if fe is not None and fe.get("newton_s") is not None:
             rows.append((entry["case"], f"FElupe {fe['version']}", 1, fe["free_dofs"], _s(fe["total_s"]),
                          _s(fe["setup_s"]), fe["newton"], _s(fe["assembly_s"]), _s(fe["solve_s"]),
                          _ms(fe["per_iteration_ms"]), "-" if fe["peak_mb"] is None else f"{fe['peak_mb']:.0f}",
-                         "1.0x", "-"))
+                         "1.0x", "1.0x", "-"))
             best = min((r for r in entry["runs"] if r.get("probe") is not None),
                        key=lambda r: r["stepping_s"], default=None)
             if best is not None:
@@ -584,7 +585,7 @@ def format_organ_report(report: dict) -> str:
     out += ["", _table(rows),
             "total: wall time of the run, setup included; ms/it: (total - setup) / Newton iterations (static), "
             "ms per implicit step after the first (dynamic); FElupe/ours: FElupe's Newton time over ours "
-            "(setup excluded on both sides); peak MB: the process's peak resident memory."]
+            "(setup excluded on both sides), per it: the same per Newton iteration; peak MB: the process's peak resident memory."]
     used = [r.get("threads_in_use") for e in report["cases"] for r in e["runs"] if r.get("threads_in_use")]
     if used and all(t.get("runtime") is None for t in used):
         notes.append("this runtime has no thread switch (runtime.parallel): TENSORMASS_THREADS was ignored, "

@@ -188,3 +188,21 @@ def test_bench_organ_quick(tmp_path):
         assert abs(fe["max_u"] - run["max_u"]) <= 1e-6 * fe["max_u"]
         assert run["felupe_ratio"] > 0 and run["felupe_ratio_per_iteration"] > 0
     assert "FElupe" in text and "probe" in text
+
+
+def test_a_failing_run_is_reported_not_raised(tmp_path):
+    """A run whose process fails (here: its mesh file is missing) becomes a row with the reason."""
+    case = bench_organ.QUICK_CASES[0]
+    missing = tmp_path / "nothing.msh"
+    result = bench_organ._subprocess("--worker", {"case": bench_organ.asdict(case), "mesh": str(missing),
+                                                  "method": "auto"}, 1, 120)
+    assert result["status"] == "failed" and "nothing.msh" in result["message"]
+    result.update(method="auto", threads=1)
+    entry = {"case": case.name, "title": case.title, "spec": bench_organ.asdict(case), "runs": [result],
+             "felupe": None, "skipped": None}
+    bench_organ._compare(entry)
+    report = {"machine": {"cpu": "x", "python": "3", "numpy": "n", "numba": "n"}, "date": "today",
+              "settings": {"solvers": ["auto"], "skipped_solvers": {}, "threads": [1], "felupe": False},
+              "cases": [entry]}
+    text = bench_organ.format_organ_report(report)
+    assert "failed" in text and "nothing.msh" in text
