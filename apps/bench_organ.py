@@ -441,6 +441,8 @@ def run_organ_bench(quick=False, cases=None, solvers=None, threads=None, felupe=
     threads = tuple(int(n) for n in (threads or (QUICK_THREADS if quick else DEFAULT_THREADS)))
     if any(n < 1 for n in threads):
         raise TensormassError("--threads: every thread count must be >= 1")
+    if not timeout > 0:
+        raise TensormassError(f"--timeout must be a positive number of seconds, got {timeout}")
     if any(not mesh_path(c, mesh_folder).is_file() for c in selected if c.body == "organ"):
         require_gmsh()                   # before anything runs: a clear message, not a failure halfway
     report = {"benchmark": "organ", "machine": machine_info(), "commit": _git_commit(),
