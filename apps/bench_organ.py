@@ -443,16 +443,23 @@ def run_organ_bench(quick=False, cases=None, solvers=None, threads=None, felupe=
         raise TensormassError("--threads: every thread count must be >= 1")
     if not timeout > 0:
         raise TensormassError(f"--timeout must be a positive number of seconds, got {timeout}")
+    import numba
+    cores = int(numba.config.NUMBA_NUM_THREADS)        # the most threads the runtime's switch accepts
+    skipped_threads = {n: f"numba sees {cores} core(s)" for n in threads if n > cores}
+    threads = tuple(n for n in threads if n <= cores)
     if any(not mesh_path(c, mesh_folder).is_file() for c in selected if c.body == "organ"):
         require_gmsh()                   # before anything runs: a clear message, not a failure halfway
     report = {"benchmark": "organ", "machine": machine_info(), "commit": _git_commit(),
               "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
               "settings": {"quick": bool(quick), "solvers": methods, "skipped_solvers": skipped_solvers,
-                           "threads": list(threads), "felupe": bool(felupe), "timeout_s": timeout,
+                           "threads": list(threads), "skipped_threads": skipped_threads,
+                           "felupe": bool(felupe), "timeout_s": timeout,
                            "thread_switch": "TENSORMASS_THREADS"},
               "cases": []}
     for name, why in skipped_solvers.items():
         log(f"solver {name}: skipped ({why})")
+    for n, why in skipped_threads.items():
+        log(f"{n} threads: skipped ({why})")
     for case in selected:
         entry = {"case": case.name, "title": case.title, "spec": asdict(case), "runs": [], "felupe": None,
                  "skipped": None}
@@ -546,6 +553,8 @@ def format_organ_report(report: dict) -> str:
            f"threads {', '.join(map(str, s['threads']))} (TENSORMASS_THREADS, one process per run)"]
     for name, why in s["skipped_solvers"].items():
         out.append(f"solver {name} skipped: {why}")
+    for n, why in s.get("skipped_threads", {}).items():
+        out.append(f"{n} threads skipped: {why}")
     rows = [("case", "solver (used)", "thr", "dofs", "total s", "setup s", "Newton", "assembly s", "solve s",
              "ms/it or /step", "peak MB", "FElupe/ours", "per it", "probe diff")]
     notes = []

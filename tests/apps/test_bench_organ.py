@@ -206,3 +206,13 @@ def test_a_failing_run_is_reported_not_raised(tmp_path):
               "cases": [entry]}
     text = bench_organ.format_organ_report(report)
     assert "failed" in text and "nothing.msh" in text
+
+
+def test_thread_counts_past_the_cores_are_skipped(monkeypatch):
+    import numba
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 1)
+    monkeypatch.setattr(resources, "check", lambda *a, **k: (_ for _ in ()).throw(resources.ResourceError("big")))
+    report = bench_organ.run_organ_bench(quick=True, cases=["quick_hex_cantilever_12x2x4"], threads=[1, 2],
+                                         progress=None)
+    assert report["settings"]["threads"] == [1] and "1 core" in report["settings"]["skipped_threads"][2]
+    assert "2 threads skipped" in bench_organ.format_organ_report(report)
