@@ -38,6 +38,7 @@ from ..runtime.output import write_json_atomic
 from ..runtime.samples import random_elements
 from .bench_assembly import add_assembly_command
 from .bench_integrators import add_integrators_command
+from .bench_organ import add_organ_command
 from .bench_steps import add_steps_command
 from .classic import LAWS, load_classic
 from .machine import format_machine, machine_info
@@ -486,6 +487,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_steps_command(sub)
     add_integrators_command(sub)
     add_assembly_command(sub)
+    add_organ_command(sub)
     return bench
 
 
