@@ -5,18 +5,21 @@
     W, f_int, K = assemble(model, u)                  # the same, for one-off use
 
 Per part the pattern stores where every element matrix entry (e, r, s) lands in
-the CSR data array, so a step only runs the kernel and one scatter loop.  With
-more than one numba thread the scatter runs colour by colour in parallel:
-elements of one colour share no node, so they never write the same entry.
+the CSR data array (and, per node pair, where its block starts in its rows), so a
+step runs the kernel and one scatter loop per block of elements, into buffers kept
+between calls.  Segments of blocks sharing no node form colours; colours run in a
+fixed order and the segments of one colour on runtime.parallel's threads, so the
+result does not depend on the thread count.
 """
 from __future__ import annotations
 
 import sys
 import time
+from contextlib import nullcontext
 
 import numba
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController, threadpool_limits
 import scipy.sparse as sp
 from numba import njit, prange
 
@@ -138,6 +141,18 @@ def _symmetrise_screen(K, tol, bad):
         bad[e] = not ok
 
 
+_blas_controller = None
+
+
+def _one_blas_thread():
+    """threadpool_limits(1) through one cached controller (a fresh threadpool_limits inspects
+    every loaded library: 0.4 ms, paid per block of elements)."""
+    global _blas_controller
+    if _blas_controller is None:
+        _blas_controller = ThreadpoolController()
+    return _blas_controller.limit(limits=1, user_api="blas")
+
+
 def project_psd(K: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Element Hessians with negative eigenvalues clamped to zero, symmetrised.
 
@@ -151,14 +166,20 @@ def project_psd(K: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         out = np.array(K, order="C")
     elif out is not K:
         np.copyto(out, K)
+    # Many tiny eigenproblems: BLAS threads only add overhead (measured 3.1 s vs 0.04 s
+    # for 288 30x30 matrices on 2 cores), so run them single-threaded.
+    with _one_blas_thread():
+        return _project_into(out)
+
+
+def _project_into(out: np.ndarray) -> np.ndarray:
+    """project_psd in place; the caller limits BLAS to one thread (the Assembler does so once
+    around a whole pass: the limit is process-wide, so worker threads must not toggle it)."""
     bad = np.empty(len(out), dtype=np.bool_)
     _symmetrise_screen(out, PSD_TOLERANCE, bad)
     suspect = np.flatnonzero(bad)
     if suspect.size:
-        # Many tiny eigenproblems: BLAS threads only add overhead (measured 3.1 s vs 0.04 s
-        # for 288 30x30 matrices on 2 cores), so run them single-threaded.
-        with threadpool_limits(limits=1, user_api="blas"):
-            w, V = np.linalg.eigh(out[suspect])
+        w, V = np.linalg.eigh(out[suspect])
         neg = np.flatnonzero(w[:, 0] < 0.0)
         if neg.size:
             Vb, wb = V[neg], np.maximum(w[neg], 0.0)
@@ -574,12 +595,23 @@ class Assembler:
                 _scatter_block_f(f, fe, dofs, s, m)
             if data is not None and what != "forces":
                 if project:
-                    project_psd(Ke, out=Ke)
+                    _project_into(Ke)
                 if rel is None:
                     _scatter_block_K(data, Ke, pos, s, m)
                 else:
                     _scatter_block_K_nodes(data, Ke, cells, rel, indptr, dpn, s, m)
 
+        with _one_blas_thread() if project else nullcontext():
+            self._colours(plan, shares, buffers, run)
+        if flags.any():
+            part = plan.part
+            bad = np.flatnonzero(flags)
+            raise InvertedElementError(f"{what}: det F <= 0 (inverted element) where law {part.law!r} is undefined",
+                                       part.cell_ids_active[bad])
+
+    @staticmethod
+    def _colours(plan, shares, buffers, run):
+        """Segments colour by colour; those of one colour shared among the threads."""
         order, starts = plan.order, plan.starts
         for c in range(len(starts) - 1):
             segments = order[starts[c]:starts[c + 1]]
@@ -590,11 +622,6 @@ class Assembler:
                     run(g, bufs)
             else:
                 _parallel.run_shares(lambda sh: [run(g, buffers[sh]) for g in segments[sh::n_sh]], n_sh)
-        if flags.any():
-            part = plan.part
-            bad = np.flatnonzero(flags)
-            raise InvertedElementError(f"{what}: det F <= 0 (inverted element) where law {part.law!r} is undefined",
-                                       part.cell_ids_active[bad])
 
     # -- public ---------------------------------------------------------------------------------
     def energy(self, u: np.ndarray) -> float:
