@@ -378,12 +378,14 @@ def node_block_map(pos: np.ndarray, cells: np.ndarray, indptr: np.ndarray, dpn: 
         return None
     first = pos[:, ::dpn, ::dpn].astype(np.int64)                      # (n, k, k): entry (a 0, b 0)
     rel = first - indptr[cells * dpn][:, :, None]
-    # the map must reproduce every position exactly (checked once, vectorised)
+    # the map must reproduce every position exactly (checked once, vectorised, in chunks)
     i = np.arange(dpn)
-    rows = indptr[(cells[:, :, None] * dpn + i)]                        # (n, k, dpn)
-    rebuilt = (rows[:, :, :, None, None] + rel[:, :, None, :, None] + i[None, None, None, None, :])
-    if not np.array_equal(rebuilt.reshape(pos.shape), pos):
-        return None
+    for s in range(0, n, 8192):
+        t = min(n, s + 8192)
+        rows = indptr[(cells[s:t, :, None] * dpn + i)]                  # (m, k, dpn)
+        rebuilt = rows[:, :, :, None, None] + rel[s:t, :, None, :, None] + i[None, None, None, None, :]
+        if not np.array_equal(rebuilt.reshape((t - s,) + pos.shape[1:]), pos[s:t]):
+            return None
     return rel.astype(np.int32 if pos.dtype == np.int32 else np.int64)
 
 
@@ -406,7 +408,12 @@ class _Plan:
         self.dofs = np.ascontiguousarray(part.dofs_active, dtype=np.int64)
         self.D = np.ascontiguousarray(part.D_active, dtype=np.float64)
         self.nd, self.k, self.dpn = k.n_dofs, k.n_nodes, dofs_per_node
-        self.block = max(1, min(self.n, block_size(self.nd, self.k, dofs_per_node, k.n_constants, pos.dtype.itemsize)))
+        # A hand-written kernel (runtime.custom_kernels) has no generated module to write into
+        # buffers: it is called through its own methods, on the whole part at once.
+        self.generic = getattr(k, "module", None) is None
+        self.block = max(1, min(self.n, block_size(self.nd, self.k, dofs_per_node, self.D.shape[1], pos.dtype.itemsize)))
+        if self.generic:
+            self.block = max(1, self.n)
         n_blocks = (self.n + self.block - 1) // self.block
         # Segments: SEGMENTS runs of consecutive blocks, coloured so that segments of one colour
         # share no node.  Segments go in colour order, blocks inside a segment in element order
@@ -421,7 +428,7 @@ class _Plan:
         entries = self.n * self.nd * self.nd
         if parallel is None:
             parallel = entries >= PARALLEL_MIN_ENTRIES
-        self.parallel = bool(parallel) and _releases_gil(k)
+        self.parallel = bool(parallel) and not self.generic and _releases_gil(k)
         self.flags = np.zeros(self.n, dtype=np.int32)
         self.energy = np.zeros(self.n)
         self.indptr = indptr.astype(np.int64)
@@ -563,11 +570,10 @@ class Assembler:
         plan = self.plans[i]
         if not plan.n:
             return
-        mod = plan.part.kernel.module
         U = u.reshape(self.model.n_points, self.model.dofs_per_node)
         D, cells, dofs, pos, flags, B = plan.D, plan.cells, plan.dofs, plan.pos, plan.flags, plan.block
         rel, indptr, dpn = plan.rel, plan.indptr, self.model.dofs_per_node
-        call = getattr(mod, what)
+        call = getattr(plan.part.kernel if plan.generic else plan.part.kernel.module, what)
         shares = plan.shares()
         buffers = plan.buffers(shares)
 
@@ -580,10 +586,18 @@ class Assembler:
             m = t - s
             ue, fe, Ke = bufs[0][:m], bufs[1][:m], bufs[2][:m]
             _gather(U, cells, s, t, ue)
-            if what == "energy":
+            if plan.generic:
+                result = _global_ids(plan.part, lambda: call(D[s:t], ue))
+                if what == "energy":
+                    plan.energy[s:t] = result
+                    return
+                fe, Ke = (result, None) if what == "forces" else (None, result) if what == "stiffness" else result
+                fe = None if fe is None else np.ascontiguousarray(fe, dtype=np.float64)
+                Ke = None if Ke is None else np.ascontiguousarray(Ke, dtype=np.float64)
+            elif what == "energy":
                 call(D[s:t], ue, plan.energy[s:t], flags[s:t])
                 return
-            if what == "forces":
+            elif what == "forces":
                 call(D[s:t], ue, fe, flags[s:t])
             elif what == "stiffness":
                 call(D[s:t], ue, Ke, flags[s:t])
@@ -691,6 +705,10 @@ class Assembler:
         dofs = np.ascontiguousarray(p.dofs[:1], dtype=np.int64)
         _scatter_block_f(f, np.zeros((1, nd)), dofs, 0, 1)
         _scatter_block_K(data, np.zeros((1, nd, nd)), self.pattern.positions[0][:1], 0, 1)
+        plan = self.plans[0]
+        if plan.rel is not None:
+            _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.cells, plan.rel, plan.indptr,
+                                   self.model.dofs_per_node, 0, 1)
         self.constant_stiffness()            # Hooke parts: their one assembly belongs to setup
 
 

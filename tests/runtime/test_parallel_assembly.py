@@ -229,3 +229,15 @@ threads = THREADS
         assert "--threads: expected a whole number" in capsys.readouterr().err
         assert main(["run", str(path), "--quiet", "--threads", "1"]) == 0
         assert parallel.worker_threads() == 1
+
+
+def test_full_position_scatter_when_no_node_block_map(small_blocks, monkeypatch):
+    model = model_of("tetra10", (2, 2, 2), "stvk", "gauss2")
+    u = 0.01 * np.random.default_rng(6).standard_normal(model.n_dofs)
+    blocked = Assembler(model)
+    assert blocked.plans[0].rel is not None
+    monkeypatch.setattr(assembly, "node_block_map", lambda *args: None)
+    full = Assembler(model)
+    assert full.plans[0].rel is None
+    check_against_reference(model, full, u)
+    assert full.forces_and_stiffness(u)[1].tobytes() == blocked.forces_and_stiffness(u)[1].tobytes()
