@@ -184,6 +184,22 @@ def _bench_entry(entry, n, backends, repeats, seed, log, cold_compile) -> dict:
             lambda Dv=Dv, mod=mod: mod.forces_and_stiffness(Dv, u, f, K, flags),
             {"forces": lambda Dv=Dv, mod=mod: mod.forces(Dv[:1], u[:1], f[:1], flags[:1]),
              "forces_and_stiffness": lambda Dv=Dv, mod=mod: mod.forces_and_stiffness(Dv[:1], u[:1], f[:1], K[:1], flags[:1])}))
+    # The public API on the same batch: with out= buffers (no allocation) and without (fresh arrays).
+    # Its checks (shapes, one finiteness sum over u, flags) are what separates it from the raw rows.
+    for backend, kernel in kernels.items():
+        Db = D if kernel is first else kernel.constants(X, E=1.0e5, nu=0.3)
+        impls.append(_Impl(
+            f"{backend}-api-out",
+            lambda Db=Db, k=kernel: k.forces(Db, u, out=f, flags=flags),
+            lambda Db=Db, k=kernel: k.forces_and_stiffness(Db, u, out=(f, K), flags=flags),
+            {"forces": lambda Db=Db, k=kernel: k.forces(Db[:1], u[:1], out=f[:1], flags=flags[:1]),
+             "forces_and_stiffness": lambda Db=Db, k=kernel: k.forces_and_stiffness(Db[:1], u[:1], out=(f[:1], K[:1]))}))
+        impls.append(_Impl(
+            f"{backend}-api",
+            lambda Db=Db, k=kernel: k.forces(Db, u),
+            lambda Db=Db, k=kernel: k.forces_and_stiffness(Db, u),
+            {"forces": lambda Db=Db, k=kernel: k.forces(Db[:1], u[:1]),
+             "forces_and_stiffness": lambda Db=Db, k=kernel: k.forces_and_stiffness(Db[:1], u[:1])}))
     classic = None
     if entry.law in LAWS and first.dim == 3:
         classic = load_classic(entry.element, entry.law, entry.quadrature)
@@ -298,6 +314,23 @@ def format_kernel_report(report: dict) -> str:
             rows.append((r["entry"], _rate(rate["c"]), _rate(rate["numba"]), _rate(rate["classic"]),
                          _ratio(ratio.get("best")), _ratio(ratio.get("c")), _ratio(ratio.get("numba"))))
         out += ["", _table(rows)]
+    rows = [("public API (k.forces_and_stiffness)", "backend", "raw f+K", "API out= f+K", "API f+K", "classic f+K",
+             "out=/raw", "out=/classic", "API/raw", "raw f", "API out= f", "out=/raw f")]
+    for r in report["results"]:
+        rates = r["rates"]
+        for b in ("c", "numba"):
+            if b not in rates or f"{b}-api-out" not in rates:
+                continue
+            get = lambda name, kind: rates.get(name, {}).get(kind)   # noqa: E731
+            raw, out_, api = (get(b, "forces_and_stiffness"), get(f"{b}-api-out", "forces_and_stiffness"),
+                              get(f"{b}-api", "forces_and_stiffness"))
+            classic = get("classic", "forces_and_stiffness")
+            div = lambda a, c: None if a is None or c is None else a / c   # noqa: E731
+            rows.append((r["entry"], b, _rate(raw), _rate(out_), _rate(api), _rate(classic), _ratio(div(out_, raw)),
+                         _ratio(div(out_, classic)), _ratio(div(api, raw)), _rate(get(b, "forces")),
+                         _rate(get(f"{b}-api-out", "forces")), _ratio(div(get(f"{b}-api-out", "forces"), get(b, "forces")))))
+    out += ["", _table(rows), "raw: the generated function into preallocated arrays (k.module...); API out=: "
+            "k.forces_and_stiffness(D, u, out=(f, K)); API: the same without out= (fresh arrays each call)."]
     rows = [("constants: precompute vs recompute", "C f", "C f recomp.", "C f+K", "C f+K recomp.",
              "numba f", "numba f recomp.", "numba f+K", "numba f+K recomp.", "B/elem pre", "B/elem recomp.")]
     for r in report["results"]:

@@ -348,6 +348,9 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
 
 def cmd_run(args) -> int:
     scene = Scene.from_toml(args.scene, max_memory=getattr(args, "max_memory", None))
+    if getattr(args, "threads", None) is not None:       # --threads overrides [solver] threads
+        from ..runtime.parallel import parse_threads
+        scene.solver.threads = parse_threads(args.threads, "--threads")
     data = run_scene(scene, out=args.out, json_path=args.json, quiet=args.quiet,
                      overwrite=getattr(args, "overwrite", False))
     return data["exit_code"]
@@ -418,6 +421,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
     p.add_argument("--max-memory", metavar="SIZE", help=_MAX_MEMORY_HELP)
+    p.add_argument("--threads", metavar="N", help="assembly threads (overrides [solver] threads and "
+                   "$TENSORMASS_THREADS; default: every core); results do not depend on it")
     p.set_defaults(run=cmd_run)
 
     p = subparsers.add_parser("demo", help="run the built-in demo (a mixed bar bending under its own weight)")

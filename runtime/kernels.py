@@ -101,19 +101,66 @@ class Kernel:
         return table
 
     def _displacements(self, D, u):
+        """D and u as C-contiguous float64 arrays of the right shapes (views when they already are)."""
         D = np.ascontiguousarray(D, dtype=np.float64)
         if D.ndim != 2 or D.shape[1] != self.n_constants:
             raise TensormassError(f"{self}: constants must have shape (n_elem, {self.n_constants}), got {D.shape}")
-        u = np.ascontiguousarray(u, dtype=np.float64).reshape(D.shape[0], self.n_nodes, self.dim)
-        if not np.all(np.isfinite(u)):
-            bad = np.flatnonzero(~np.isfinite(u).reshape(len(u), -1).all(axis=1))
-            raise TensormassError(f"displacements contain NaN or Inf in element(s) {', '.join(map(str, bad[:10]))}")
+        u = np.ascontiguousarray(u, dtype=np.float64)
+        per_node = self.n_dofs // self.n_nodes
+        if u.size != D.shape[0] * self.n_dofs:
+            raise TensormassError(f"{self}: displacements must have shape ({D.shape[0]}, {self.n_nodes}, {per_node}), "
+                                  f"got {u.shape}")
+        u = u.reshape(D.shape[0], self.n_nodes, per_node)
+        self._finite(u)
         return D, u
 
+    @staticmethod
+    def _finite(u):
+        """A clear error when u holds NaN or Inf (never a silent NaN result).
+
+        One pairwise sum over u (no temporary array): it is finite whenever every entry is (a NaN
+        or Inf always propagates); only when it is not (a NaN, or an overflow) is u searched
+        element by element.  It is one memory pass over u: ~0.15 ms per 50 000 tetra, 2-4 % of a
+        forces_and_stiffness call, ~10 % of a forces-only call (measured, apps/bench.py)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = np.add.reduce(u, axis=None)
+        if np.isfinite(total):
+            return
+        bad_u = ~np.isfinite(u.reshape(len(u), -1)).all(axis=1)
+        if bad_u.any():
+            bad = np.flatnonzero(bad_u)
+            raise TensormassError(f"displacements contain NaN or Inf in element(s) {', '.join(map(str, bad[:10]))}")
+
+    def _buffer(self, array, shape, name: str, dtype=np.float64) -> np.ndarray:
+        """An out= buffer: exactly `shape`, dtype, C-contiguous and writeable; else a clear error."""
+        if array is None:
+            return np.zeros(shape, dtype=dtype) if dtype != np.float64 else np.empty(shape)
+        if not isinstance(array, np.ndarray) or array.shape != shape or array.dtype != dtype \
+                or not array.flags.c_contiguous or not array.flags.writeable:
+            got = (f"{array.dtype} array of shape {array.shape}"
+                   + ("" if array.flags.c_contiguous else ", not C-contiguous")
+                   + ("" if array.flags.writeable else ", read-only")) if isinstance(array, np.ndarray) \
+                else type(array).__name__
+            raise TensormassError(f"{self}: {name} must be a writeable C-contiguous {np.dtype(dtype).name} array "
+                                  f"of shape {shape}, got {got}")
+        return array
+
+    def _flags(self, flags, n):
+        return self._buffer(flags, (n,), "flags=", np.int32)
+
     def _check(self, flags, what: str):
+        if not flags.any():
+            return
         bad = np.flatnonzero(flags)
-        if bad.size:
-            raise InvertedElementError(f"{what}: det F <= 0 (inverted element) where law {self.law!r} is undefined", bad)
+        raise InvertedElementError(f"{what}: det F <= 0 (inverted element) where law {self.law!r} is undefined", bad)
+
+    @staticmethod
+    def _pair(out, what):
+        if out is None:
+            return None, None
+        if not isinstance(out, (tuple, list)) or len(out) != 2:
+            raise TensormassError(f"{what}: out= must be a pair (f, K) of buffers")
+        return out
 
     # -- kernels ----------------------------------------------------------------------------
     def constants(self, X, E=None, nu=None, **native) -> np.ndarray:
@@ -131,32 +178,41 @@ class Kernel:
                                          np.flatnonzero(flags == 2))
         return D
 
-    def energy(self, D, u) -> np.ndarray:
+    # The four evaluations take optional output buffers (out=, flags=): with them a call
+    # allocates nothing (the runtime's assembly and the benchmark's "public API with out=" row);
+    # without them fresh arrays are returned as before.  Buffers are checked (shape, float64,
+    # C-contiguous, writeable), never copied: the result is written into them and returned.
+    def energy(self, D, u, out=None, flags=None) -> np.ndarray:
         D, u = self._displacements(D, u)
-        out, flags = np.empty(len(D)), np.zeros(len(D), dtype=np.int32)
+        n = len(D)
+        out, flags = self._buffer(out, (n,), "energy out="), self._flags(flags, n)
         self.module.energy(D, u, out, flags)
         self._check(flags, "energy")
         return out
 
-    def forces(self, D, u) -> np.ndarray:
+    def forces(self, D, u, out=None, flags=None) -> np.ndarray:
         D, u = self._displacements(D, u)
-        f, flags = np.empty((len(D), self.n_dofs)), np.zeros(len(D), dtype=np.int32)
+        n = len(D)
+        f, flags = self._buffer(out, (n, self.n_dofs), "forces out="), self._flags(flags, n)
         self.module.forces(D, u, f, flags)
         self._check(flags, "forces")
         return f
 
-    def stiffness(self, D, u) -> np.ndarray:
+    def stiffness(self, D, u, out=None, flags=None) -> np.ndarray:
         D, u = self._displacements(D, u)
-        K, flags = np.empty((len(D), self.n_dofs, self.n_dofs)), np.zeros(len(D), dtype=np.int32)
+        n = len(D)
+        K, flags = self._buffer(out, (n, self.n_dofs, self.n_dofs), "stiffness out="), self._flags(flags, n)
         self.module.stiffness(D, u, K, flags)
         self._check(flags, "stiffness")
         return K
 
-    def forces_and_stiffness(self, D, u):
+    def forces_and_stiffness(self, D, u, out=None, flags=None):
         D, u = self._displacements(D, u)
-        f = np.empty((len(D), self.n_dofs))
-        K = np.empty((len(D), self.n_dofs, self.n_dofs))
-        flags = np.zeros(len(D), dtype=np.int32)
+        n = len(D)
+        f, K = self._pair(out, "forces_and_stiffness")
+        f = self._buffer(f, (n, self.n_dofs), "forces_and_stiffness out[0] (f)")
+        K = self._buffer(K, (n, self.n_dofs, self.n_dofs), "forces_and_stiffness out[1] (K)")
+        flags = self._flags(flags, n)
         self.module.forces_and_stiffness(D, u, f, K, flags)
         self._check(flags, "forces_and_stiffness")
         return f, K

@@ -403,9 +403,14 @@ class Model:
         return PointProbe(probe.name, None, -1, nodes, np.full(nodes.size, 1.0 / nodes.size), np.zeros(0), 0.0)
 
     # -- helpers for the integrators ------------------------------------------------------------
-    def element_displacements(self, part: Part, u: np.ndarray) -> np.ndarray:
-        """(n_active, k, dofs_per_node) nodal dofs of a part's active elements (pair with part.D_active)."""
-        return u.reshape(self.n_points, self.dofs_per_node)[part.cells_active]
+    def element_displacements(self, part: Part, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """(n_active, k, dofs_per_node) nodal dofs of a part's active elements (pair with part.D_active).
+
+        out: a preallocated (n_active, k, dofs_per_node) float64 array to gather into (no allocation)."""
+        U = u.reshape(self.n_points, self.dofs_per_node)
+        if out is None:
+            return U[part.cells_active]
+        return np.take(U, part.cells_active, axis=0, out=out, mode="clip")   # "clip": unbuffered
 
     def warm_up(self, outputs=None) -> None:
         """Compile (or load from numba's cache) the kernel outputs the solver will call."""

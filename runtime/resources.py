@@ -16,8 +16,9 @@ The peak is modelled phase by phase after what the runtime allocates:
                 float64, once per law a cell can be switched to), dof tables, nodal vectors
     pattern     SparsePattern: the (n_cells, k*dim, k*dim) scatter positions (int64) are
                 held; building them sorts that many keys (PATTERN_BUILD copies at the peak)
-    step        element stiffness blocks (n_cells, k*dim, k*dim) float64 per Newton
-                iteration (PROJECTION times that while PSD projection runs), copies of the
+    step        element stiffness blocks: the assembler's blocks of about BLOCK_BYTES per
+                thread (PROJECTION_BLOCK times that while PSD projection runs; before the
+                blocked assembler, a whole (n_cells, k*dim, k*dim) array and PROJECTION), copies of the
                 global matrix, and the factor: a band Cholesky of n x kd entries (kd from the
                 nodes per cell layer along the longest axis) or CG's IC(0) factor
     history     per-step rows, bounded by Simulation (HISTORY_ROWS)
@@ -81,6 +82,9 @@ KERNEL_CODE = 16 * MiB
 # pyramid bars of 0.4-5.8 M element matrix entries):
 PATTERN_BUILD = 8.0      # SparsePattern.__init__ peak / (8 B x element matrix entries): 7.3-7.6 measured
 PROJECTION = 9.5         # step peak with PSD projection / element matrix bytes: 8.0-9.3 (1.8-3.3 without)
+# Since the assembler projects block by block (runtime.assembly): the block, the copy of its
+# indefinite elements, their eigenvectors and the rebuild's temporaries.
+PROJECTION_BLOCK = 5.0
 MESH_CHECK = 26.0        # check_mesh transient / bytes of points and cells: 8-26
 NNZ_HELD = 12 + 19       # B per nonzero: CSR indices + row ids (12), Dirichlet submatrix maps (12-19)
 NNZ_SETUP = 36           # B per nonzero while the submatrix maps are built (transient)
@@ -531,11 +535,16 @@ class _Estimator:
         dim = self.dpn                       # from here on: per-node dofs
         model = 8 * self.cell_ints * (1 + dim) + CELL_BYTES * sum(c.cells.values()) + DOF_BYTES * self.dofs
         matrices = 8 * self.entries
-        pattern = matrices + NNZ_HELD * self.nnz
+        # positions are int32 below 2**31 nonzeros (runtime.assembly), plus the assembler's
+        # node-block map and int64 copies of cells and dof tables
+        pattern = (matrices // 2 if self.nnz < 2**31 - 1 else matrices) + NNZ_HELD * self.nnz \
+            + 8 * self.cell_ints * (2 + dim)
+        # the assembler evaluates blocks of about BLOCK_BYTES per thread, never a whole-part K
+        blocks = min(matrices, 2 * _assembly_block_bytes() * _threads())
         if self.kind == "explicit":          # element forces only; the pattern is still built
             step = {"element forces": 2 * 8 * self.cell_ints * dim}
         else:
-            step = {"element matrices": matrices * (PROJECTION if self.projection else 1.0),
+            step = {"element matrices": blocks * (PROJECTION_BLOCK if self.projection else 1.0),
                     "global matrices": NNZ_STEP * self.nnz, "factor": self._factor()}
         phases = {                           # what is allocated on top of the runtime, mesh and history
             "mesh check": {"mesh check": MESH_CHECK * mesh},
@@ -601,3 +610,13 @@ def _suggest(n: int) -> str:
         if n >= scale:
             return f"{math.ceil(n * 1.05 / scale)}{unit}"
     return f"{math.ceil(n * 1.05)}"
+
+
+def _assembly_block_bytes() -> int:
+    from .assembly import BLOCK_BYTES      # deferred: assembly imports numba loops
+    return int(BLOCK_BYTES)
+
+
+def _threads() -> int:
+    from .parallel import available
+    return available()

@@ -180,6 +180,7 @@ class Solver:
     max_displacement: float = 10.0        # stop when a node moves this x the body size away from the mean motion
     on_inversion: str = "warn"            # inverted elements (laws defined there): "warn" (invalid at the end) | "stop"
     mass: str = "lumped"                  # lumped (row sums / HRZ) | consistent (implicit solvers; runtime/mass.py)
+    threads: int | None = None            # assembly threads (runtime/parallel.py); None: $TENSORMASS_THREADS / every core
 
 
 @dataclass
@@ -327,7 +328,7 @@ _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
-           "max_displacement", "on_inversion", "mass", "rho_inf")
+           "max_displacement", "on_inversion", "mass", "rho_inf", "threads")
 _PROBE = ("name", "point", "region", "box")
 _OUTPUT = ("dir", "every")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
@@ -740,6 +741,8 @@ class _Parser:
             if s.mass == "consistent" and s.kind == "explicit":
                 raise SceneError("solver.mass: 'consistent' needs an implicit solver (implicit_euler, "
                                  "backward_euler, generalized_alpha); explicit integration inverts the lumped (diagonal) mass")
+        if "threads" in t:
+            s.threads = self.integer(t["threads"], "solver.threads", 1)
         if "rho_inf" in t:
             s.rho_inf = self.number(t["rho_inf"], "solver.rho_inf", min_value=0.0)
             if s.rho_inf > 1.0:

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from . import parallel as _parallel
 from .adapt import MAX_STATIC_PASSES, Adapter
 from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, RunStopped,
                      TensormassError)
@@ -127,6 +128,9 @@ class Simulation:
             self.model = Model.from_scene(scene_or_model)
             self._setup = time.perf_counter() - start
         self.progress, self.writer = progress, writer
+        threads = getattr(self.model.solver, "threads", None)
+        if threads is not None:                  # [solver] threads (or run --threads): the one switch
+            _parallel.set_threads_from(threads, "solver.threads")
         self.adapter = Adapter(self.model) if self.model.adapt else None
         self._u0, self._v0 = self._initial(u0), self._initial(v0)
         self.ctx = None
