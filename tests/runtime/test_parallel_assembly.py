@@ -241,3 +241,39 @@ def test_full_position_scatter_when_no_node_block_map(small_blocks, monkeypatch)
     assert full.plans[0].rel is None
     check_against_reference(model, full, u)
     assert full.forces_and_stiffness(u)[1].tobytes() == blocked.forces_and_stiffness(u)[1].tobytes()
+
+
+@pytest.mark.parametrize("backend", ["numba", "c"])
+@pytest.mark.parametrize("element,quadrature", [("tetra", "gauss1"), ("hexahedron", "gauss2"), ("tetra10", "gauss2")])
+def test_the_assembler_takes_the_fused_path_and_it_equals_the_buffered_one(monkeypatch, small_blocks, backend,
+                                                                          element, quadrature):
+    """Every generated kernel assembles f and K through its fused function (no element buffers);
+    the buffered path (BUFFERED_ELEMENTS) gives the same bytes, on one thread and two."""
+    model = model_of(element, cells=(4, 2, 2), quadrature=quadrature, backend=backend)
+    u = 1e-3 * np.random.default_rng(3).standard_normal(model.n_dofs)
+    fused = Assembler(model)
+    assert all(plan.fused is not None for plan in fused.plans)
+    calls = []
+    for plan in fused.plans:
+        original = plan.fused
+        plan.fused = lambda *a, original=original: (calls.append(len(a[0])), original(*a))[1]
+    out = {}
+    for threads in (1, 2):
+        with parallel.threads(min(threads, parallel.available())):
+            f, data = fused.forces_and_stiffness(u)
+            out[("fused", threads)] = (f.tobytes(), data.tobytes(), fused.stiffness(u).tobytes())
+    assert sum(calls) == 2 * 2 * model.parts[0].n_active     # f+K and K-only, twice
+    monkeypatch.setattr(assembly, "BUFFERED_ELEMENTS", frozenset({element}))
+    buffered = Assembler(model)
+    assert all(plan.fused is None for plan in buffered.plans)
+    with parallel.threads(1):
+        f, data = buffered.forces_and_stiffness(u)
+        reference = (f.tobytes(), data.tobytes(), buffered.stiffness(u).tobytes())
+    assert out[("fused", 1)] == out[("fused", 2)]
+    assert out[("fused", 1)][:2] == reference[:2]
+    # K alone: fused takes it from the f+K code (its K bytes equal f+K's), the buffered path from
+    # the generated stiffness function (other common subexpressions: round-off apart)
+    assert out[("fused", 1)][2] == out[("fused", 1)][1]
+    K_fused, K_buffered = (np.frombuffer(x) for x in (out[("fused", 1)][2], reference[2]))
+    np.testing.assert_allclose(K_fused, K_buffered, rtol=0, atol=1e-13 * np.abs(K_buffered).max())
+    check_against_reference(model, fused, u)
