@@ -7,7 +7,10 @@ into the global force vector and CSR values) on unit cubes, three ways, numba an
            element buffers (n_elem, n_dofs, n_dofs), then runtime.assembly's serial scatter
            through the per-entry map;
   fused    the generated forces_and_stiffness_scatter: u read through cells, f and K added
-           straight into the global arrays through the node-blocked map (runtime/fused.py).
+           straight into the global arrays through the node-blocked map (runtime/fused.py);
+  runtime  what a run calls: runtime.assembly.Assembler.forces_and_stiffness of a Model on the
+           mesh (it takes the fused path), on one thread and on every thread runtime.parallel
+           offers (the two must give the same bytes: checked).
 
 Cases: the 40 x 40 x 40 x 6 = 384 000-tetra neo-Hookean cube (SymX's NeoHookean assembly
 comparison: 138-174 ms on this machine class; the issue's target is <= 90 ms, or assembly >=
@@ -125,7 +128,36 @@ def run_case(name, element, quadrature, n, backends=BACKENDS, repeats=REPEATS, p
                  f"({row['ratio_to_kernel']['buffers']:.0%} of kernel rate) | fused {row['ms']['fused']:8.1f} ms "
                  f"({row['ratio_to_kernel']['fused']:.0%}) -> {row['faster']} faster")
         del fe, Ke, u
+        row.update(_runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeats))
+        rt = row["runtime_ms"]
+        progress("  " + " | ".join(f"runtime Assembler, {t} thread(s) {ms:8.1f} ms" for t, ms in rt.items()))
     return result
+
+
+def _runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeats) -> dict:
+    """Assembler.forces_and_stiffness of a Model on this mesh, on 1 thread and on all of them."""
+    from ..runtime import parallel
+    from ..runtime.assembly import Assembler
+    from ..runtime.model import Model
+    from ..runtime.scene import Material, Solver
+    model = Model(mesh, [Material(law=LAW, quadrature=quadrature, E=1.0e6, nu=0.3)],
+                  solver=Solver(backend=backend), check=False)
+    asm = Assembler(model)
+    u = U.reshape(-1)
+    times, bits = {}, {}
+    for threads in sorted({1, parallel.available()}):
+        with parallel.threads(threads):
+            times[threads] = _best(lambda: asm.forces_and_stiffness(u), repeats)
+            f, data = asm.forces_and_stiffness(u)
+            bits[threads] = f.tobytes() + data.tobytes()
+    if len(set(bits.values())) != 1:
+        raise TensormassError(f"{element} ({backend}): the runtime assembly differs between thread counts")
+    f, data = asm.forces_and_stiffness(u)
+    scale = np.abs(data_ref).max()
+    if np.abs(data - data_ref).max() > 1e-12 * scale or np.abs(f - f_ref).max() > 1e-12 * np.abs(f_ref).max():
+        raise TensormassError(f"{element} ({backend}): the runtime assembly differs from buffers + scatter")
+    return {"runtime_ms": {str(t): 1e3 * v for t, v in times.items()},
+            "runtime_elements_per_s": {str(t): len(mesh.blocks[0].cells) / v for t, v in times.items()}}
 
 
 def run_assembly_bench(quick: bool = False, json_path=None, backends=BACKENDS, progress=print) -> dict:
@@ -164,6 +196,9 @@ def format_report(report: dict) -> str:
             lines.append(f"384k tetra cube, {b}: fused {ms:.0f} ms (target <= {TARGET_MS:.0f} ms, SymX "
                          f"{SYMX_MS[0]:.0f}-{SYMX_MS[1]:.0f} ms; assembly/kernel {row['ratio_to_kernel']['fused']:.0%},"
                          f" target >= {TARGET_RATIO:.0%})")
+    lines.append("runtime Assembler.forces_and_stiffness (ms by threads): " + "; ".join(
+        f"{name} {b} " + ", ".join(f"{t}: {ms:.1f}" for t, ms in row.get("runtime_ms", {}).items())
+        for name, case in report["cases"].items() for b, row in case["backends"].items()))
     lines.append("faster path per element type: " + "; ".join(
         f"{el}: " + ", ".join(f"{b} {p}" for b, p in by.items()) for el, by in report["faster"].items()))
     return "\n".join(lines)
