@@ -237,21 +237,8 @@ def available_solvers(requested=None) -> tuple[list, dict]:
 
 
 def _unavailable(solvers, name: str) -> str | None:
-    """Why a solver cannot run here (None: it can), from what the solvers module reports."""
-    for probe in ("available", "is_available", "solver_available"):       # a module-wide query, if any
-        fn = getattr(solvers, probe, None)
-        if callable(fn):
-            try:
-                ok = fn(name)
-            except (TypeError, TensormassError):
-                continue
-            if isinstance(ok, str):
-                return ok or None
-            return None if ok else f"runtime.solvers.{probe}({name!r}) is false"
-    has = getattr(solvers, f"has_{name}", None)
-    if callable(has) and not has():
-        return f"runtime.solvers.has_{name}() is false (its package is not installed)"
-    return None
+    """Why a solver cannot run here (None: it can), as runtime.solvers reports it."""
+    return solvers.unavailable(name)
 
 
 # -- one run (subprocess) ---------------------------------------------------------------------

@@ -48,7 +48,7 @@ from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, u
 from .errors import TensormassError
 
 __all__ = ["LinearSolver", "ConstrainedSystem", "DIRECT_LIMIT", "METHODS", "PRECONDITIONERS",
-           "has_pardiso", "has_pyamg", "warm_up", "band_ordering", "band_costs", "reuse_cap",
+           "has_pardiso", "has_pyamg", "unavailable", "warm_up", "band_ordering", "band_costs", "reuse_cap",
            "pardiso_costs", "amg_cost"]
 
 METHODS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
@@ -94,6 +94,15 @@ DIRECT_LIMIT = 2_000_000
 # many times the iterations it took when it was built (plus a margin): then it is rebuilt.
 AMG_REBUILD_RATIO = 2.0
 AMG_REBUILD_MARGIN = 10
+
+
+def unavailable(method: str) -> str | None:
+    """Why the linear solver `method` cannot run here (None: it can)."""
+    if method == "pardiso" and not pardiso.available():
+        return pardiso.unavailable_reason() or "MKL's PARDISO is not available"
+    if method == "amg" and not amg.available():
+        return "pyamg is not installed (pip install pyamg)"
+    return None
 
 
 def has_pardiso() -> bool:
