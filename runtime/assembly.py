@@ -206,7 +206,7 @@ def _project_psd_reference(K: np.ndarray) -> np.ndarray:
 class SparsePattern:
     """CSR structure of the global matrix and, per part, the scatter positions."""
 
-    def __init__(self, dof_tables, n_dofs: int):
+    def __init__(self, dof_tables, n_dofs: int, dofs_per_node: int | None = None):
         self.n_dofs = n_dofs
         # parts of one switchable group share their dof table: sort its entries once
         first = {}
@@ -214,6 +214,16 @@ class SparsePattern:
             first.setdefault(id(d), i)
         owner = [first[id(d)] for d in dof_tables]
         dof_tables = [dof_tables[i] for i in sorted(set(owner))]
+        nodes = _node_tables(dof_tables, n_dofs, dofs_per_node)
+        if nodes is None:
+            positions = self._by_dofs(dof_tables, n_dofs)
+        else:
+            positions = self._by_nodes(nodes, n_dofs // dofs_per_node, dofs_per_node)
+        slot = {o: j for j, o in enumerate(sorted(set(owner)))}
+        self.positions = [positions[slot[o]] for o in owner]
+
+    def _by_dofs(self, dof_tables, n_dofs):
+        """The pattern from every (row dof, column dof) pair of every element: one sort of n nd^2 keys."""
         keys = [self._keys(d, n_dofs) for d in dof_tables]
         diag = np.arange(n_dofs, dtype=np.int64) * (n_dofs + 1)   # keep every diagonal entry
         uniq, inverse = np.unique(np.concatenate(keys + [diag]), return_inverse=True)
@@ -222,16 +232,49 @@ class SparsePattern:
         self.indices = cols.astype(itype)
         self.indptr = np.searchsorted(rows, np.arange(n_dofs + 1)).astype(itype)
         self.nnz = uniq.size
-        self.positions, start = [], 0
+        positions, start = [], 0
         for d, k in zip(dof_tables, keys):
             nd = d.shape[1]
             # int32 where the matrix allows it: the scatter reads these at every assembly
-            self.positions.append(inverse[start:start + k.size].reshape(len(d), nd, nd).astype(itype))
+            positions.append(inverse[start:start + k.size].reshape(len(d), nd, nd).astype(itype))
             start += k.size
-        slot = {o: j for j, o in enumerate(sorted(set(owner)))}
-        self.positions = [self.positions[slot[o]] for o in owner]
         self.diagonal = inverse[start:].astype(np.int64)
         self._rows = rows
+        return positions
+
+    def _by_nodes(self, node_tables, n_nodes, dpn):
+        """The same pattern from node pairs (node-major dofs: every node pair is a dense dpn x dpn
+        block): a sort of dpn^2 times fewer keys.  The tetra10 organ's 8 208 cells: 1.6 s -> 0.2 s."""
+        keys = [(c[:, :, None] * n_nodes + c[:, None, :]).ravel() for c in node_tables]
+        diag = np.arange(n_nodes, dtype=np.int64) * (n_nodes + 1)
+        uniq, inverse = np.unique(np.concatenate(keys + [diag]), return_inverse=True)
+        node_rows, node_cols = np.divmod(uniq, n_nodes)
+        node_indptr = np.searchsorted(node_rows, np.arange(n_nodes + 1))
+        comp = np.arange(dpn)
+        row_len = np.repeat(dpn * np.diff(node_indptr), dpn)               # per dof row
+        indptr = np.concatenate([[0], np.cumsum(row_len)])
+        nnz = int(indptr[-1])
+        itype = np.int32 if nnz < 2**31 - 1 else np.int64
+        # dof row (m, i) holds, for every node column c of node row m, the dpn columns c dpn + j
+        expanded = (node_cols[:, None] * dpn + comp).ravel()
+        start = np.repeat(np.repeat(node_indptr[:-1] * dpn, dpn), row_len)
+        within = np.arange(nnz) - np.repeat(indptr[:-1], row_len)
+        self.indices = expanded[start + within].astype(itype)
+        self.indptr = indptr.astype(itype)
+        self.nnz = nnz
+        self._rows = np.repeat(np.arange(n_nodes * dpn, dtype=np.int64), row_len)
+        positions, at = [], 0
+        for c, k in zip(node_tables, keys):
+            n, kn = c.shape
+            rel = (dpn * (inverse[at:at + k.size].reshape(n, kn, kn) - node_indptr[c][:, :, None])).astype(itype)
+            at += k.size
+            base = indptr[c[:, :, None] * dpn + comp].astype(itype)                    # (n, kn, dpn)
+            pos = base[:, :, :, None, None] + rel[:, :, None, :, None] + comp.astype(itype)   # (n, kn, dpn, kn, dpn)
+            positions.append(pos.reshape(n, kn * dpn, kn * dpn))
+        m = np.arange(n_nodes)
+        rel_diag = inverse[at:] - node_indptr[m]
+        self.diagonal = (indptr[m[:, None] * dpn + comp] + dpn * rel_diag[:, None] + comp).ravel().astype(np.int64)
+        return positions
 
     @staticmethod
     def _keys(dofs, n_dofs):
@@ -256,7 +299,21 @@ class SparsePattern:
         return entries, c[entries].astype(self.indices.dtype), indptr.astype(self.indptr.dtype), shape
 
 
-# --------------------------------------------------------------------------- the assembler
+def _node_tables(dof_tables, n_dofs, dpn):
+    """Per dof table, its (n, k) node table when the dofs are node-major (dof = node dpn + i, the
+    runtime's layout: runtime.dofs); None when any table is not (then the pattern goes by dofs)."""
+    if not dpn or dpn < 1 or n_dofs % dpn:
+        return None
+    out = []
+    for d in dof_tables:
+        d = np.asarray(d, dtype=np.int64)
+        if d.ndim != 2 or d.shape[1] % dpn:
+            return None
+        nodes = d[:, ::dpn] // dpn
+        if not np.array_equal(d.reshape(len(d), -1, dpn), nodes[:, :, None] * dpn + np.arange(dpn)):
+            return None
+        out.append(nodes)
+    return out
 
 
 # --------------------------------------------------------------------------- element blocks
@@ -498,7 +555,7 @@ class Assembler:
 
     def __init__(self, model, parallel: bool | None = None):
         self.model = model
-        self.pattern = SparsePattern([p.dofs for p in model.parts], model.n_dofs)
+        self.pattern = SparsePattern([p.dofs for p in model.parts], model.n_dofs, model.dofs_per_node)
         self._parallel_option = parallel
         # Parts of a law quadratic in grad u (Hooke) have a constant K and f_int = -K u:
         # their K is assembled once (again after a law switch) instead of at every call.

@@ -277,3 +277,27 @@ def test_the_assembler_takes_the_fused_path_and_it_equals_the_buffered_one(monke
     K_fused, K_buffered = (np.frombuffer(x) for x in (out[("fused", 1)][2], reference[2]))
     np.testing.assert_allclose(K_fused, K_buffered, rtol=0, atol=1e-13 * np.abs(K_buffered).max())
     check_against_reference(model, fused, u)
+
+
+@pytest.mark.parametrize("element,dpn", [("tetra", 3), ("tetra10", 3), ("mixed", 3), ("quad", 2), ("triangle6", 2)])
+def test_the_pattern_by_node_pairs_equals_the_pattern_by_dofs(element, dpn):
+    """Node-major dofs: the pattern built from node pairs (a sort of dpn^2 fewer keys) is the one
+    built from every dof pair: the same CSR, positions and diagonal."""
+    from tensormass.runtime.assembly import SparsePattern
+    from tensormass.runtime.dofs import node_dofs
+    size = (1.0, 0.5, 0.5) if dpn == 3 else (1.0, 0.5)
+    cells = (4, 2, 2) if dpn == 3 else (4, 3)
+    mesh = generate_bar(size=size, cells=cells, element=element)
+    tables = [node_dofs(b.cells, dpn) for b in mesh.blocks]
+    tables.append(tables[0])                          # a shared table (a switchable group's)
+    n_dofs = mesh.n_points * dpn
+    fast, slow = SparsePattern(tables, n_dofs, dpn), SparsePattern(tables, n_dofs)
+    assert fast.nnz == slow.nnz
+    for name in ("indices", "indptr", "diagonal", "_rows"):
+        assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
+    assert len(fast.positions) == len(tables) and fast.positions[-1] is fast.positions[0]
+    for a, b in zip(fast.positions, slow.positions):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    # a table that is not node-major falls back to the dof pairs
+    shuffled = [t[:, ::-1].copy() for t in tables[:1]]
+    assert np.array_equal(SparsePattern(shuffled, n_dofs, dpn).indices, SparsePattern(shuffled, n_dofs).indices)
