@@ -4,7 +4,7 @@
 
 Cases (the scene of examples/organ/scene.toml: neo-Hookean, E 5 kPa, nu 0.45,
 density 1050, gravity and a 400 Pa traction on the top patch, clamped underneath;
-the organ scaled 2.2x, semi-axes 88 x 66 x 66 mm, meshed by examples/organ/make_organ.py):
+the organ scaled 2.2x, semi-axes 88 x 66 x 66 mm, meshed by tensormass.apps.organ_mesh):
 
     tetra10_h8_static        tetra10, h = 8 mm, static, one load step
     tetra10_h6_static        tetra10, h = 6 mm, static, one load step
@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib.util
 import json
 import os
 import re
@@ -61,7 +60,7 @@ from ..runtime.errors import TensormassError
 from ..runtime.output import write_json_atomic
 from .machine import format_machine, machine_info
 
-MAKE_ORGAN = Path(__file__).resolve().parents[1] / "examples" / "organ" / "make_organ.py"
+MAKE_ORGAN = Path(__file__).resolve().with_name("organ_mesh.py")      # the mesh maker (its hash names the meshes)
 ORGAN_SCALE = 2.2                      # liver-sized: semi-axes 88 x 66 x 66 mm
 E, NU, DENSITY = 5.0e3, 0.45, 1050.0
 GRAVITY = (0.0, 0.0, -9.81)
@@ -116,13 +115,9 @@ class GmshMissing(TensormassError):
 
 
 def load_make_organ():
-    """The `make_organ` module (examples/organ/make_organ.py of the source tree)."""
-    if not MAKE_ORGAN.is_file():
-        raise TensormassError(f"bench organ needs {MAKE_ORGAN} (the organ mesh script of a source checkout)")
-    spec = importlib.util.spec_from_file_location("tensormass_make_organ", MAKE_ORGAN)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """The organ mesh maker (tensormass.apps.organ_mesh, installed with the package)."""
+    from . import organ_mesh
+    return organ_mesh
 
 
 def require_gmsh() -> None:
@@ -401,7 +396,7 @@ def _memory_note(text: str, method: str) -> str | None:
 
 def _git_commit() -> str | None:
     try:
-        done = subprocess.run(["git", "-C", str(MAKE_ORGAN.parents[2]), "rev-parse", "--short", "HEAD"],
+        done = subprocess.run(["git", "-C", str(MAKE_ORGAN.parents[1]), "rev-parse", "--short", "HEAD"],
                               capture_output=True, text=True, timeout=10)
         return done.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):

@@ -4,6 +4,7 @@ tensormass and FElupe agreeing on the same problem, and the messages when gmsh i
 No timing assertions: speed is measured by the benchmark, never asserted here.
 """
 import json
+from pathlib import Path
 import sys
 
 import numpy as np
@@ -26,7 +27,7 @@ except ImportError:
     HAVE_FELUPE = False
 
 needs_gmsh = pytest.mark.skipif(not HAVE_GMSH, reason="gmsh is not installed (pip install tensormass[mesh])")
-COMMITTED = bench_organ.MAKE_ORGAN.with_name("organ.msh")
+COMMITTED = Path(__file__).resolve().parents[2] / "examples" / "organ" / "organ.msh"
 
 
 def _counts(path):
@@ -136,7 +137,7 @@ def test_bench_organ_skips_a_case_past_the_memory(monkeypatch, tmp_path):
 def test_scene_is_the_example_scene():
     """The bench's organ scene is examples/organ/scene.toml's (law, E, nu, density, loads, groups)."""
     import tomllib
-    example = tomllib.loads(bench_organ.MAKE_ORGAN.with_name("scene.toml").read_text())
+    example = tomllib.loads((Path(__file__).resolve().parents[2] / "examples" / "organ" / "scene.toml").read_text())
     case = bench_organ.select_cases(["tetra10_h8_static"], quick=False)[0]
     ours = tomllib.loads(bench_organ.organ_scene_text(case, "/tmp/organ.msh"))
     assert ours["material"] == example["material"]
