@@ -17,18 +17,17 @@ import sys
 import time
 from contextlib import nullcontext
 
-import numba
 import numpy as np
 from threadpoolctl import ThreadpoolController, threadpool_limits
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit
 
 from .. import laws
 from . import parallel as _parallel
 from .fused import block_positions
 from .errors import ElementError, InvertedElementError, TensormassError
 
-__all__ = ["Assembler", "assemble", "colour_elements", "project_psd", "SparsePattern"]
+__all__ = ["Assembler", "assemble", "project_psd", "SparsePattern"]
 
 
 # --------------------------------------------------------------------------- numba loops
@@ -42,59 +41,11 @@ def _scatter_matrix(data, Ke, pos, scale):
                 data[pos[e, r, s]] += scale * Ke[e, r, s]
 
 
-@njit(cache=True, parallel=True)
-def _scatter_matrix_coloured(data, Ke, pos, scale, order, starts):
-    for c in range(starts.shape[0] - 1):
-        # no two elements of colour c share a node, hence no shared CSR entry
-        for i in prange(starts[c], starts[c + 1]):
-            e = order[i]
-            for r in range(Ke.shape[1]):
-                for s in range(Ke.shape[2]):
-                    data[pos[e, r, s]] += scale * Ke[e, r, s]
-
-
 @njit(cache=True)
 def _scatter_vector(out, fe, dofs):
     for e in range(fe.shape[0]):
         for r in range(fe.shape[1]):
             out[dofs[e, r]] += fe[e, r]
-
-
-@njit(cache=True)
-def _greedy_colours(cells, node_start, node_elems):
-    """Smallest colour not used by any already coloured element sharing a node."""
-    n = cells.shape[0]
-    colour = np.full(n, -1, dtype=np.int64)
-    banned = np.full(n + 1, -1, dtype=np.int64)      # banned[c] == e: colour c is taken near e
-    for e in range(n):
-        for a in range(cells.shape[1]):
-            node = cells[e, a]
-            for j in range(node_start[node], node_start[node + 1]):
-                other = colour[node_elems[j]]
-                if other >= 0:
-                    banned[other] = e
-        c = 0
-        while banned[c] == e:
-            c += 1
-        colour[e] = c
-    return colour
-
-
-def colour_elements(cells: np.ndarray):
-    """Greedy colouring of elements so that no two of one colour share a node.
-
-    Returns (colour per element, order: element ids grouped by colour, starts:
-    offsets of each colour in order).
-    """
-    cells = np.ascontiguousarray(cells, dtype=np.int64)
-    n_nodes = int(cells.max()) + 1 if cells.size else 0
-    flat = cells.ravel()
-    node_elems = np.argsort(flat, kind="stable") // cells.shape[1]
-    node_start = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_nodes))]).astype(np.int64)
-    colour = _greedy_colours(cells, node_start, node_elems.astype(np.int64))
-    order = np.argsort(colour, kind="stable").astype(np.int64)
-    starts = np.concatenate([[0], np.cumsum(np.bincount(colour))]).astype(np.int64)
-    return colour, order, starts
 
 
 # --------------------------------------------------------------------------- PSD projection

@@ -73,7 +73,7 @@ def reuse_cap(n: int, kd: int, nnz: int, itemsize: int = 4) -> int:
 
 
 class BandPlan:
-    """A bandwidth-reducing ordering of one sparsity pattern."""
+    """A bandwidth-reducing ordering of one sparsity pattern (runtime.solvers keeps one per pattern)."""
 
     def __init__(self, A):
         self.indptr, self.indices = A.indptr, A.indices
@@ -83,13 +83,6 @@ class BandPlan:
         self.entries = (self.kd + 1) * self.n
         self.nnz = int(A.nnz)
 
-    def matches(self, A) -> bool:
-        if A.shape[0] != self.n:
-            return False
-        if A.indices is self.indices and A.indptr is self.indptr:
-            return True
-        return (A.indices.size == self.indices.size and np.array_equal(A.indptr, self.indptr)
-                and np.array_equal(A.indices, self.indices))
 
 class BandFactor:
     """A banded Cholesky factor of one matrix (for its pattern's plan); calling it applies A^-1."""

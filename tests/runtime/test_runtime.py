@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tensormass.runtime import kernels as kernels_module
-from tensormass.runtime.assembly import Assembler, assemble, colour_elements, project_psd
+from tensormass.runtime.assembly import Assembler, assemble, project_psd
 from tensormass.runtime.errors import RunStopped, TensormassError
 from tensormass.runtime.integrators import Context, stable_time_step
 from tensormass.runtime.mesh import generate_bar
@@ -273,16 +273,6 @@ def test_parallel_coloured_scatter_equals_serial():
     serial = Assembler(model, parallel=False).forces_and_stiffness(u)[1]
     coloured = Assembler(model, parallel=True).forces_and_stiffness(u)[1]
     assert np.allclose(serial, coloured, rtol=1e-13, atol=0)
-
-
-def test_colouring_separates_elements_sharing_a_node():
-    mesh = generate_bar(size=(1.0, 0.5, 0.5), cells=(6, 3, 3), element="tetra10")
-    cells = mesh.blocks[0].cells
-    colour, order, starts = colour_elements(cells)
-    for c in range(len(starts) - 1):
-        members = cells[order[starts[c]:starts[c + 1]]].ravel()
-        assert np.unique(members).size == members.size        # no shared node within a colour
-    assert np.all(colour[order[starts[:-1]]] == np.arange(len(starts) - 1))
 
 
 def test_internal_forces_are_minus_energy_gradient():
