@@ -127,7 +127,7 @@ def run_case(name, element, quadrature, n, backends=BACKENDS, repeats=REPEATS, p
         progress(f"  {backend:5s} kernel {row['ms']['kernel']:8.1f} ms | buffers+scatter {row['ms']['buffers']:8.1f} ms "
                  f"({row['ratio_to_kernel']['buffers']:.0%} of kernel rate) | fused {row['ms']['fused']:8.1f} ms "
                  f"({row['ratio_to_kernel']['fused']:.0%}) -> {row['faster']} faster")
-        del fe, Ke, u
+        fe = Ke = u = None                  # free the element buffers before the runtime rows
         row.update(_runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeats))
         rt = row["runtime_ms"]
         progress("  " + " | ".join(f"runtime Assembler, {t} thread(s) {ms:8.1f} ms" for t, ms in rt.items()))

@@ -42,7 +42,6 @@ above what the machine has is skipped with a note.
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
@@ -223,17 +222,12 @@ def available_solvers(requested=None) -> tuple[list, dict]:
     for name in (requested or offered):
         if name not in offered:
             raise TensormassError(f"unknown linear solver {name!r}; runtime.solvers offers {', '.join(offered)}")
-        reason = _unavailable(solvers, name)
+        reason = solvers.unavailable(name)
         if reason:
             skipped[name] = reason
         else:
             methods.append(name)
     return methods, skipped
-
-
-def _unavailable(solvers, name: str) -> str | None:
-    """Why a solver cannot run here (None: it can), as runtime.solvers reports it."""
-    return solvers.unavailable(name)
 
 
 # -- one run (subprocess) ---------------------------------------------------------------------

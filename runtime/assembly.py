@@ -362,40 +362,23 @@ def _scatter_block_K(data, Ke, pos, start, m):
 
 
 @njit(cache=True, nogil=True)
-def _scatter_block_K_nodes(data, Ke, cells, rel, indptr, dpn, start, m):
-    """data += Ke through the node-block map: row (a, i) of element e starts its node b's dpn
-    columns at indptr[cells[e, a] * dpn + i] + rel[e, a, b] (the dofs of a node are consecutive
-    columns, and the dpn rows of a node share their column pattern)."""
-    k = cells.shape[1]
+def _scatter_block_K_nodes(data, Ke, blocks, dpn, start, m):
+    """data += Ke through the node-blocked map of runtime.fused.block_positions: row r of element
+    e holds node b's dpn columns at blocks[e, r, b] .. + dpn - 1 (node-major dofs)."""
     for e in range(m):
-        for a in range(k):
-            na = cells[start + e, a]
-            for i in range(dpn):
-                row0 = indptr[na * dpn + i]
-                r = a * dpn + i
-                for b in range(k):
-                    base = row0 + rel[start + e, a, b]
-                    for j in range(dpn):
-                        data[base + j] += Ke[e, r, b * dpn + j]
+        for r in range(Ke.shape[1]):
+            for b in range(blocks.shape[2]):
+                base = blocks[start + e, r, b]
+                for j in range(dpn):
+                    data[base + j] += Ke[e, r, b * dpn + j]
 
 
-def node_block_map(pos: np.ndarray, cells: np.ndarray, indptr: np.ndarray, dpn: int):
-    """(n, k, k) offsets of each node block inside its rows (see _scatter_block_K_nodes), or None
-    when the pattern is not node-blocked (then the full positions are used)."""
-    n, k = cells.shape
-    if n == 0 or pos.shape[1] != k * dpn:
+def _node_blocks(pos, dpn):
+    """block_positions(pos, dpn), or None when the dofs are not node-major (full positions then)."""
+    try:
+        return block_positions(pos, dpn)
+    except TensormassError:
         return None
-    first = pos[:, ::dpn, ::dpn].astype(np.int64)                      # (n, k, k): entry (a 0, b 0)
-    rel = first - indptr[cells * dpn][:, :, None]
-    # the map must reproduce every position exactly (checked once, vectorised, in chunks)
-    i = np.arange(dpn)
-    for s in range(0, n, 8192):
-        t = min(n, s + 8192)
-        rows = indptr[(cells[s:t, :, None] * dpn + i)]                  # (m, k, dpn)
-        rebuilt = rows[:, :, :, None, None] + rel[s:t, :, None, :, None] + i[None, None, None, None, :]
-        if not np.array_equal(rebuilt.reshape((t - s,) + pos.shape[1:]), pos[s:t]):
-            return None
-    return rel.astype(np.int32 if pos.dtype == np.int32 else np.int64)
 
 
 # The fused generated path (forces_and_stiffness_scatter: evaluate and add into f and the CSR
@@ -428,7 +411,7 @@ def _releases_gil(kernel) -> bool:
 class _Plan:
     """One part's blocks, their colours, per-thread element buffers and its flags/energy arrays."""
 
-    def __init__(self, part, pos, dofs_per_node: int, parallel, indptr):
+    def __init__(self, part, pos, dofs_per_node: int, parallel):
         k = part.kernel
         self.part, self.pos = part, pos
         self.n = part.n_active
@@ -459,18 +442,11 @@ class _Plan:
         self.parallel = bool(parallel) and not self.generic and _releases_gil(k)
         self.flags = np.zeros(self.n, dtype=np.int32)
         self.energy = np.zeros(self.n)
-        self.indptr = indptr.astype(np.int64)
-        self.rel = node_block_map(pos, self.cells, self.indptr, dofs_per_node)
-        self.fused = _fused(k)
-        self._fused_pos = None
+        # one node-blocked map serves the buffered scatter and the fused kernels
+        self.blocks = _node_blocks(pos, dofs_per_node) if self.n else None
+        self.fused = _fused(k) if self.blocks is not None else None
         self._scratch_f = None
         self._buffers = []
-
-    def fused_positions(self):
-        """(n, n_dofs, n_nodes) int32 node-blocked map of the fused path (runtime.fused), once."""
-        if self._fused_pos is None:
-            self._fused_pos = block_positions(self.pos, self.dpn)
-        return self._fused_pos
 
     def scratch_f(self, size: int) -> np.ndarray:
         """A force vector the stiffness-only fused calls add into (and nobody reads)."""
@@ -523,7 +499,7 @@ class Assembler:
         self.positions = [pos if p.index is None else pos[p.index]
                           for p, pos in zip(parts, self.pattern.positions)]
         dpn = self.model.dofs_per_node
-        self.plans = [_Plan(p, pos, dpn, self._parallel_option, self.pattern.indptr) for p, pos in zip(parts, self.positions)]
+        self.plans = [_Plan(p, pos, dpn, self._parallel_option) for p, pos in zip(parts, self.positions)]
         self.parallel = [plan.parallel for plan in self.plans]
         self._constant_K = None
 
@@ -615,7 +591,7 @@ class Assembler:
             return
         U = u.reshape(self.model.n_points, self.model.dofs_per_node)
         D, cells, dofs, pos, flags, B = plan.D, plan.cells, plan.dofs, plan.pos, plan.flags, plan.block
-        rel, indptr, dpn = plan.rel, plan.indptr, self.model.dofs_per_node
+        blocks, dpn = plan.blocks, self.model.dofs_per_node
         if plan.fused is not None and not project and what in ("forces_and_stiffness", "stiffness"):
             self._evaluate_fused(plan, what, U, f, data)
             return
@@ -656,10 +632,10 @@ class Assembler:
             if data is not None and what != "forces":
                 if project:
                     _project_into(Ke)
-                if rel is None:
+                if blocks is None:
                     _scatter_block_K(data, Ke, pos, s, m)
                 else:
-                    _scatter_block_K_nodes(data, Ke, cells, rel, indptr, dpn, s, m)
+                    _scatter_block_K_nodes(data, Ke, blocks, dpn, s, m)
 
         with _one_blas_thread() if project else nullcontext():
             self._colours(plan, shares, buffers, run)
@@ -672,11 +648,9 @@ class Assembler:
     def _evaluate_fused(self, plan, what, U, f, data) -> None:
         """The generated fused path, segment by segment in the same colour order (and on the same
         threads) as the buffered path: f and data get each element's terms with no buffers."""
-        pos, flags, D, cells, fn = plan.fused_positions(), plan.flags, plan.D, plan.cells, plan.fused
+        pos, flags, D, cells, fn = plan.blocks, plan.flags, plan.D, plan.cells, plan.fused
         if what == "stiffness":
             f = plan.scratch_f(U.size)
-        if U.size != f.size:
-            raise TensormassError(f"internal: {U.size} dofs, a force vector of {f.size}")
 
         def run(segment, _bufs):
             s = segment * plan.segment
@@ -774,8 +748,8 @@ class Assembler:
         _scatter_block_f(f, np.zeros((1, nd)), dofs, 0, 1)
         _scatter_block_K(data, np.zeros((1, nd, nd)), self.pattern.positions[0][:1], 0, 1)
         plan = self.plans[0]
-        if plan.rel is not None:
-            _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.cells, plan.rel, plan.indptr,
+        if plan.blocks is not None:
+            _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.blocks,
                                    self.model.dofs_per_node, 0, 1)
         self.constant_stiffness()            # Hooke parts: their one assembly belongs to setup
 

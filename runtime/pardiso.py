@@ -51,8 +51,9 @@ _why = None
 
 def _candidates():
     env = os.environ.get("TENSORMASS_MKL_RT")
-    if env:
+    if env:                                     # the user's choice, and only it
         yield env
+        return
     for prefix in (sys.prefix, getattr(site, "USER_BASE", None) or ""):
         for path in sorted(glob.glob(os.path.join(prefix, "lib", "libmkl_rt.so*")), key=len):
             yield path

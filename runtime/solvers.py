@@ -43,7 +43,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import amg, pardiso
-from .band import BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_solve, one_blas_thread
+from .band import BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_solve, one_blas_thread, reuse_cap
 from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
 from .errors import TensormassError
 
@@ -61,13 +61,14 @@ PRECONDITIONERS = ("ic", "jacobi", "amg")
 #
 # Measured, one fresh solve each (analysis + factor; band: its factor + refinement):
 #   system (free dofs, nnz, kd, PARDISO factor flops)        band32    PARDISO 32-bit    SuperLU  IC-CG
-#   10k-tet StVK bar (6 552, 0.26 M, 278, 0.49 G)             18 ms    21 + 21 ms       114 ms    30 ms
-#   3072-hex bar (11 664, 0.80 M, 275, 1.3 G)                 48 ms    48 + 47 ms       294 ms   132 ms
-#   20k-hex bar (64 980, 4.8 M, 1145, 53 G)                  1.6 s     0.40 + 1.4 s       16 s   0.6 s
+#   10k-tet StVK bar (6 552, 0.26 M, 278, 0.49 G)             14 ms*   21 + 21 ms       114 ms*   30 ms*
+#   3072-hex bar (11 664, 0.80 M, 275, 1.3 G)                 48 ms    48 + 47 ms       294 ms*  132 ms*
+#   20k-hex bar (64 980, 4.8 M, 1145, 53 G)                  1.6 s     0.40 + 1.4 s      16 s*   0.6 s*
 #   tetra organ h 6 mm (9 819, 0.39 M, 863, 1.3 G)            133 ms   37 + 40 ms        0.67 s    68 ms
 #   tetra10 organ h 8 mm (34 434, 2.6 M, 3677, 18 G)         8.2 s    0.29 + 0.81 s        -     1.3 s
 #   tetra10 organ h 6 mm (77 085, 6.0 M, 6713, 105 G)         58 s    0.48 + 1.4 s (2 threads)
-# (the organ: examples/organ/make_organ.py scaled 2.2x, liver-sized; `tensormass bench organ`.)
+# (* session 3's `bench steps` measurements; the organ: tensormass.apps.organ_mesh scaled 2.2x,
+# liver-sized, `tensormass bench organ`.)
 # PARDISO's factor runs at 24-37 Gflop/s in single precision on one thread (13-20 in double),
 # its solve streams the factor: ~2.2e-9 s per factor entry (single), its analysis (nested
 # dissection, once per pattern) ~1.6e-7 s per stored entry.  Multigrid-CG (pyamg, rigid-body
@@ -123,11 +124,6 @@ def pardiso_costs(flops: float, factor_nnz: float, single: bool = True) -> tuple
 def amg_cost(nnz: int) -> float:
     """Modelled seconds of one multigrid-preconditioned CG solve (setup included)."""
     return AMG_SECONDS_PER_NNZ * float(nnz)
-
-
-def reuse_cap(n: int, kd: int, nnz: int, itemsize: int = 4) -> int:
-    """CG iterations a kept band factor may precondition (see runtime.band.reuse_cap)."""
-    return reuse_iterations(*band_costs(n, kd, nnz, itemsize))
 
 
 def _worker_threads() -> int:

@@ -235,12 +235,14 @@ def test_full_position_scatter_when_no_node_block_map(small_blocks, monkeypatch)
     model = model_of("tetra10", (2, 2, 2), "stvk", "gauss2")
     u = 0.01 * np.random.default_rng(6).standard_normal(model.n_dofs)
     blocked = Assembler(model)
-    assert blocked.plans[0].rel is not None
-    monkeypatch.setattr(assembly, "node_block_map", lambda *args: None)
+    assert blocked.plans[0].blocks is not None
+    monkeypatch.setattr(assembly, "_node_blocks", lambda *args: None)
     full = Assembler(model)
-    assert full.plans[0].rel is None
+    assert full.plans[0].blocks is None and full.plans[0].fused is None
     check_against_reference(model, full, u)
     assert full.forces_and_stiffness(u)[1].tobytes() == blocked.forces_and_stiffness(u)[1].tobytes()
+    # the buffered scatter through the node-blocked map (projected Hessians never take the fused path)
+    assert full.stiffness(u, True).tobytes() == blocked.stiffness(u, True).tobytes()
 
 
 @pytest.mark.parametrize("backend", ["numba", "c"])

@@ -15,7 +15,9 @@ from test_solvers import grid_laplacian, relres, spd_system
 needs_mkl = pytest.mark.skipif(not pardiso.available(), reason="MKL (PARDISO) is not installed here")
 
 
-def cube_system(n=7, seed=0):
+def cube_system(n=10, seed=0):
+    """A 3 000-dof SPD system: large enough that PARDISO's bits differ between 1 and 2 threads
+    outside MKL's reproducible mode (checked: the thread tests below fail with iparm[33] = 0)."""
     A = grid_laplacian(n, n, n, shift=0.02)
     A.sort_indices()
     return A, np.random.default_rng(seed).standard_normal(A.shape[0])
@@ -43,10 +45,12 @@ def test_pardiso_gives_the_same_bits_on_one_and_two_threads():
 def test_linear_solver_bits_do_not_depend_on_the_thread_count(monkeypatch):
     A, b = cube_system(seed=1)
     out = []
+    monkeypatch.setattr(solvers, "PARDISO_PARALLEL_DOFS", 0)     # this small system would factor on one thread
     for threads in (1, 2):
         monkeypatch.setattr(solvers, "_worker_threads", lambda t=threads: t)
         solver = LinearSolver("pardiso")
         x1, _ = solver.solve(A, b)
+        assert solver._pattern.pardiso(A).handles[True].threads == threads
         x2, _ = solver.solve(A * 1.001, b)           # the kept factor preconditions CG
         assert solver.last == "pardiso32-reuse"
         out.append(x1.tobytes() + x2.tobytes())
@@ -181,3 +185,39 @@ def test_whole_runs_agree_with_the_band_solver(linear):
 def test_scene_solver_names_are_the_runtime_methods():
     from tensormass.runtime.scene import LINEAR_SOLVERS
     assert LINEAR_SOLVERS == solvers.METHODS
+
+
+def test_a_run_asking_for_pardiso_without_mkl_fails_with_the_reason(tmp_path):
+    """TENSORMASS_MKL_RT names the library to use, and only it: a wrong path makes `linear =
+    "pardiso"` a clear error and a non-zero exit through the CLI, before anything is written."""
+    import os
+    import subprocess
+    import sys
+    scene = tmp_path / "bar.toml"
+    scene.write_text('''
+[mesh]
+generate = "bar"
+size = [1.0, 0.2, 0.2]
+cells = [4, 1, 1]
+element = "hexahedron"
+[[material]]
+region = "all"
+law = "stvk"
+quadrature = "gauss2"
+E = 1e6
+nu = 0.3
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0, 0, -9.81]
+[solver]
+linear = "pardiso"
+[output]
+dir = "out"
+''')
+    env = dict(os.environ, TENSORMASS_MKL_RT=str(tmp_path / "missing" / "libmkl_rt.so"))
+    done = subprocess.run([sys.executable, "-m", "tensormass.launcher", "run", str(scene)], env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode != 0
+    assert "'pardiso' is unavailable" in done.stderr and "missing" in done.stderr
+    assert not (tmp_path / "out").exists()
