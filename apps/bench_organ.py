@@ -203,19 +203,14 @@ def probe_point(case: Case) -> tuple:
 
 
 def make_scene(text: str, method: str):
-    """Scene from TOML text with solver.linear = method (set after parsing when the scene keys do
-    not list it: the runtime's LinearSolver takes every solvers.METHODS name)."""
-    from ..runtime.scene import LINEAR_SOLVERS, Scene
+    """Scene from TOML text with [solver] linear = method (the scene keys take every solvers.METHODS name)."""
+    from ..runtime.scene import Scene
     text = re.sub(r'(?m)^linear = .*\n', "", text)
-    if method in LINEAR_SOLVERS:
-        return Scene.from_string(text.replace('[solver]\n', f'[solver]\nlinear = "{method}"\n', 1))
-    scene = Scene.from_string(text)
-    scene.solver.linear = method
-    return scene
+    return Scene.from_string(text.replace('[solver]\n', f'[solver]\nlinear = "{method}"\n', 1))
 
 
 def available_solvers(requested=None) -> tuple[list, dict]:
-    """(methods to run, {method: why skipped}) from solvers.METHODS, read now (the lead adds solvers)."""
+    """(methods to run, {method: why skipped}) from solvers.METHODS, read now."""
     from ..runtime import solvers
     methods, skipped = [], {}
     offered = list(solvers.METHODS)

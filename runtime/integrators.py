@@ -44,7 +44,9 @@ class Context:
         self.model = model
         s = model.solver
         self.asm = assembler if assembler is not None else Assembler(model)
-        modes = rigid_body_modes(model.mesh.points, np.arange(model.n_dofs), model.dofs_per_node)
+        # multigrid's near-nullspace, only where a solver may use multigrid
+        modes = (rigid_body_modes(model.mesh.points, np.arange(model.n_dofs), model.dofs_per_node)
+                 if s.linear in ("auto", "amg") else None)
         self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs, modes)
         self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
         if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
