@@ -15,6 +15,11 @@ _ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "Degenerat
 __all__ = ["__version__", "load_kernel", "Kernel", "Scene", "Simulation", *_ERRORS]
 
 
+def __dir__():
+    """The public names (imported on first use, so dir() lists them before they are loaded)."""
+    return sorted(set(globals()) | set(__all__))
+
+
 def __getattr__(name):
     if name in _ERRORS:
         from .runtime import errors

@@ -255,7 +255,7 @@ def run_tensormass(spec: dict) -> dict:
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), spec["method"])
     t0 = time.perf_counter()
-    sim = Simulation(scene)
+    sim = Simulation(scene, output=False)
     try:
         summary = sim.run().to_dict()
     except TensormassError as error:

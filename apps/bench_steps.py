@@ -80,7 +80,7 @@ def measure(element, cells, size, law, kind, linear, steps) -> dict:
     from ..runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, kind, linear, steps))
     t0 = time.perf_counter()
-    sim = Simulation(scene)
+    sim = Simulation(scene, output=False)
     summary = sim.run().to_dict()
     elapsed = time.perf_counter() - t0
     t, it = summary["time"], summary["iterations"]
@@ -110,7 +110,7 @@ def health_overhead(element, cells, size, law, steps=30) -> dict:
     measured by the monitor in the same run, so machine load hits both alike."""
     from ..runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, "implicit_euler", "direct", steps))
-    summary = Simulation(scene).run()
+    summary = Simulation(scene, output=False).run()
     wall = summary.per_step["wall"]
     later = float(np.mean(wall[1:]))
     per = summary.time["health"] / steps

@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import generated, laws
 from ..backends import BACKENDS
+from ..generator import GENERATOR_VERSION
 from ..generator.catalogue import entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
@@ -154,6 +155,7 @@ def report_numba_compile_times(selected, out: Path) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tensormass", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version", version=f"tensormass {GENERATOR_VERSION}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("list", help="list the kernel catalogue with op and constant counts")

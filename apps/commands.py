@@ -21,8 +21,7 @@ import time
 from importlib import resources
 from pathlib import Path
 
-from ..runtime.errors import EXIT_OK, RunInterrupted, RunStopped, TensormassError
-from ..runtime.output import SUMMARY_FORMAT, Writer, check_summary_path, write_summary
+from ..runtime.errors import RunInterrupted, RunStopped, TensormassError
 from ..runtime.scene import Scene
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
@@ -93,7 +92,8 @@ _RUN_FAILURES = (TensormassError, ValueError, ArithmeticError, RuntimeError)
 def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, stream=None,
               overwrite: bool = False) -> dict:
     """Run a validated scene; returns the summary dict (Summary.to_dict() plus format, status,
-    message, exit_code, scene and output), also written to json_path when given.
+    message, exit_code, scene and output), written where runtime.run_files says (the output
+    folder's summary.json, and json_path when given): the same files as Simulation(scene).run().
 
     out overrides scene.output.dir; frames go there every scene.output.every steps.
     Everything that can be checked is checked before the first step (the --json path,
@@ -101,98 +101,54 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     failed, invalid, interrupted) still writes its summary; data["exit_code"] says how it
     ended (0, 3 or 130). Bad input and unwritable outputs raise TensormassError (exit 2).
     """
+    from ..runtime.run_files import RunFiles
     stream = stream if stream is not None else sys.stdout
-    if out is not None:
-        scene.output.dir = str(out)
-    out_dir = Path(scene.output.dir) if scene.output.dir else None
-    mesh = scene.load_mesh()
-    writer = Writer(out_dir, mesh, overwrite=overwrite) if out_dir is not None else None
-    json_path = check_summary_path(json_path, scene_file=scene.source, writer=writer)
-    if writer is not None:
-        writer.prepare()
+    files = RunFiles(scene, out=out, json_path=json_path, overwrite=overwrite,
+                     dir_from="given on the command line, relative to the working directory" if out is not None else None)
+    files.prepare()
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
-    summary, stopped = _simulate(Simulation, scene, writer, progress)
-    data = _summary_data(summary, stopped, scene, mesh, writer, out_dir)
-    if data["output"] is not None:        # the path rule (runtime/paths.py), said where the files went
-        data["output"]["dir_from"] = ("given on the command line, relative to the working directory" if out is not None else
-                                      "[output] dir, relative to the scene file")
-    if json_path is not None:
-        write_summary(json_path, data)
-        data["output_json"] = str(json_path)
+    data, stopped = _simulate(Simulation, scene, files, progress)
     if not quiet:
-        print_summary(data, stream=stream, json_path=json_path)
+        print_summary(data, stream=stream, json_path=files.json_path)
     if stopped is not None:
         print(f"tensormass: run {data['status']}: {data['message']}", file=sys.stderr)
     return data
 
 
-def _simulate(Simulation, scene, writer, progress):
-    """(summary, None) for a run we stand behind, (partial summary or None, RunStopped) otherwise.
+def _simulate(Simulation, scene, files, progress):
+    """(summary dict, None) for a run we stand behind, (summary dict, RunStopped) otherwise.
 
-    Other failures propagate (exit 2), after the writer dropped a folder it created for nothing."""
+    The command line hands the Simulation the frames' writer and writes the summary itself with
+    the same RunFiles as Simulation(scene).run() uses. Other failures propagate (exit 2), after
+    the files dropped a folder made for nothing."""
     sim = None
     try:
-        sim = Simulation(scene, progress=progress, writer=writer)
-        return sim.run(), None
+        sim = Simulation(scene, progress=progress, writer=files.writer)
+        summary, stopped = sim.run(), None
     except RunStopped as exc:
-        _output_failure(writer)
-        stopped = exc
+        summary, stopped = exc.summary, exc
     except KeyboardInterrupt:
         # Simulation turns Ctrl-C during the steps into RunInterrupted; this one came before
-        # them (setup) or from a runtime that does not yet: the summary says so all the same.
+        # them (setup): the summary says so all the same.
         stopped = RunInterrupted(f"interrupted (Ctrl-C) after step {_steps_done(sim)}",
                                  getattr(sim, "summary", None))
+        summary = stopped.summary
     except BaseException as exc:
-        _output_failure(writer)
-        if writer is not None:
-            writer.discard()
+        files.abandon()
         if isinstance(exc, _RUN_FAILURES) and not isinstance(exc, TensormassError):
             raise TensormassError(f"simulation failed: {type(exc).__name__}: {exc}") from exc
         raise
     finally:
         if progress is not None:
             progress.finish()
-    if writer is not None:
-        writer.close()
-        if writer.stopped is None:                # the runtime did not note it: do it here
-            writer.mark_stopped(_steps_done(sim), f"run {stopped.status}: {stopped}")
-        writer.discard()
-    return stopped.summary, stopped
-
-
-def _output_failure(writer) -> None:
-    """A frame that could not be written (disk full...) ends the run as bad environment (exit 2),
-    whatever status the runtime gave the stop: raise the writer's error naming the file."""
-    if writer is not None and writer.error is not None:
-        raise writer.error
+    return files.finish(summary, stopped), stopped
 
 
 def _steps_done(sim) -> int:
     """Steps the run finished (the runtime's count; 0 before the first)."""
     done = getattr(getattr(sim, "summary", None), "steps_done", None)
     return int(done if done is not None else getattr(sim, "_step", 0) or 0)
-
-
-def _summary_data(summary, stopped, scene, mesh, writer, out_dir) -> dict:
-    """The summary dict: the runtime's Summary (when there is one), how the run ended, scene, output."""
-    data = {"format": SUMMARY_FORMAT}
-    if summary is not None:
-        data.update(summary.to_dict())
-    if stopped is not None:
-        data.update(status=stopped.status, message=str(stopped), exit_code=stopped.exit_code)
-    else:
-        data.setdefault("status", "ok")
-        data.setdefault("message", None)
-        data["exit_code"] = EXIT_OK
-    data.setdefault("warnings", [])
-    data["scene"] = {"name": scene.name, "source": scene.source, "solver": scene.solver.kind,
-                     "nodes": mesh.n_points,
-                     "cells": {b: sum(len(x) for x in mesh.blocks if x.type == b) for b in mesh.cell_types()}}
-    data["output"] = None if writer is None else {
-        "dir": str(out_dir), "pvd": str(writer.pvd_path) if writer.frames else None,
-        "frames": len(writer.frames), "every": scene.output.every}
-    return data
 
 
 def _fmt_seconds(value) -> str:
@@ -336,8 +292,9 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
                                + (f"; {o['dir_from']})" if o.get("dir_from") else ")")))
     else:
         rows.append(("output", "none (set [output] dir or --out)"))
-    if json_path is not None:
-        rows.append(("summary", str(json_path)))
+    written = [str(p) for p in ((o or {}).get("summary"), json_path) if p is not None]
+    if written:
+        rows.append(("summary", ", ".join(dict.fromkeys(written))))
     width = max(len(r[0]) for r in rows)
     for key, value in rows:
         print(f"{key:<{width}}  {value}", file=out)

@@ -182,8 +182,9 @@ def _same_file(a, b) -> bool:
         return False
 
 
-def check_summary_path(path, scene_file=None, writer=None) -> Path | None:
-    """The --json path, checked before the run: None stays None.
+def check_summary_path(path, scene_file=None, writer=None, what: str = "--json") -> Path | None:
+    """A summary path (--json, or [output] summary.json: `what` names it), checked before the run:
+    None stays None.
 
     Refused: a folder, a missing folder, the scene file, the .pvd or a frame of the
     writer's folder (now or later), a symbolic link, a device/fifo/socket, and any
@@ -193,35 +194,35 @@ def check_summary_path(path, scene_file=None, writer=None) -> Path | None:
         return None
     path = Path(path)
     if path.is_dir():
-        raise TensormassError(f"--json {path}: is a folder; give a file name")
+        raise TensormassError(f"{what} {path}: is a folder; give a file name")
     if not path.parent.is_dir():
-        raise TensormassError(f"--json {path}: folder {path.parent} does not exist")
+        raise TensormassError(f"{what} {path}: folder {path.parent} does not exist")
     if scene_file is not None and _same_file(path, scene_file):
-        raise TensormassError(f"--json {path}: is the scene file; give another file name")
+        raise TensormassError(f"{what} {path}: is the scene file; give another file name")
     if writer is not None and writer.owns_name(path):
-        raise TensormassError(f"--json {path}: is one of the output files ({writer.out_dir}/"
+        raise TensormassError(f"{what} {path}: is one of the output files ({writer.out_dir}/"
                               f"{writer.name}.pvd or {writer.name}_*.vtu); give another file name")
-    _check_existing_summary(path)
-    check_writable(path.parent, "--json")
+    _check_existing_summary(path, what)
+    check_writable(path.parent, what)
     return path
 
 
-def _check_existing_summary(path: Path) -> None:
+def _check_existing_summary(path: Path, what: str = "--json") -> None:
     """An existing file at path may only be replaced when it is one of our summaries."""
     try:
         info = os.lstat(path)
     except FileNotFoundError:
         return
     except OSError as exc:
-        raise TensormassError(f"--json {path}: {_reason(exc)}") from None
+        raise TensormassError(f"{what} {path}: {_reason(exc)}") from None
     if stat.S_ISLNK(info.st_mode):
-        raise TensormassError(f"--json {path}: is a symbolic link (to {os.readlink(path)}); "
+        raise TensormassError(f"{what} {path}: is a symbolic link (to {os.readlink(path)}); "
                               "refusing to replace it, give the file itself or another name")
     if not stat.S_ISREG(info.st_mode):
-        raise TensormassError(f"--json {path}: exists and is not a regular file (a device, fifo or socket); "
+        raise TensormassError(f"{what} {path}: exists and is not a regular file (a device, fifo or socket); "
                               "refusing to write there")
     if not is_summary_file(path):
-        raise TensormassError(f"--json {path}: exists and is not a tensormass summary (no "
+        raise TensormassError(f"{what} {path}: exists and is not a tensormass summary (no "
                               f'"format": "{SUMMARY_FORMAT}"); refusing to replace it, remove it or give another name')
 
 

@@ -10,6 +10,7 @@ one-off costs from per-step costs.
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -112,22 +113,43 @@ class _History:
 class Simulation:
     """One run: `Simulation(scene_or_model).run()`.
 
-    writer: optional object with write_frame(step, time, points, displacement,
-    fields) and close(), called at step 0, every output.every steps and at the
-    last step (and closed even when the run fails).  progress(step, n_steps) is
-    called after every step.  u0 / v0: optional initial displacement and velocity
-    ((n_points, dim) or flat).
+    Files: a Scene's run writes what its [output] section asks (VTU frames, .pvd and
+    summary.json in [output] dir: runtime.run_files), as `tensormass run` does.
+    output=False writes nothing; output="folder" writes there instead (like --out);
+    output=RunFiles(...) gives the files made by the caller. json: one more summary
+    file (like --json); overwrite: like --overwrite. A Model (no scene) writes nothing
+    unless writer is given: an object with write_frame(step, time, points,
+    displacement, fields) and close(), called at step 0, every output.every steps and
+    at the last step (and closed even when the run fails).
+
+    progress(step, n_steps) is called after every step; on_step(sim) too, after it:
+    between steps the live state is readable (sim.step, sim.time, sim.displacement,
+    sim.velocity, sim.dofs) for coupling with a viewer or a haptic loop.
+    u0 / v0: optional initial displacement and velocity ((n_points, dim) or flat).
     """
 
-    def __init__(self, scene_or_model, progress=None, writer=None, u0=None, v0=None):
+    def __init__(self, scene_or_model, progress=None, writer=None, u0=None, v0=None, *,
+                 output=None, json=None, overwrite: bool = False, on_step=None):
         start = time.perf_counter()
+        self.files = None
         if isinstance(scene_or_model, Model):
+            if output not in (None, False) or json is not None:
+                raise TensormassError("Simulation(model, output=...): a Model has no scene to take [output] from; "
+                                      "give the Scene, or a writer")
             self.model = scene_or_model
             self._setup = scene_or_model.build_time
         else:
-            self.model = Model.from_scene(scene_or_model)
+            if writer is None:
+                self.files = _run_files(scene_or_model, output, json, overwrite)
+                writer = None if self.files is None else self.files.writer
+            try:
+                self.model = Model.from_scene(scene_or_model)
+            except BaseException:
+                if self.files is not None:
+                    self.files.abandon()
+                raise
             self._setup = time.perf_counter() - start
-        self.progress, self.writer = progress, writer
+        self.progress, self.writer, self.on_step = progress, writer, on_step
         threads = getattr(self.model.solver, "threads", None)
         if threads is not None:                  # [solver] threads (or run --threads): the one switch
             _parallel.set_threads_from(threads, "solver.threads")
@@ -158,6 +180,16 @@ class Simulation:
         return np.array(self.model.split_dofs(self.dofs.ravel())[0])
 
     @property
+    def step(self) -> int:
+        """The last finished step (0 before the first)."""
+        return getattr(self, "_step", 0)
+
+    @property
+    def time(self) -> float:
+        """The simulated time of the current state [s] (static runs: the load factor's step time)."""
+        return float(self.ctx.t) if self.ctx is not None else 0.0
+
+    @property
     def velocity(self) -> np.ndarray:
         v = self.ctx.v if self.ctx is not None else np.zeros(self.model.n_dofs)
         return np.array(self.model.split_dofs(v)[0])
@@ -185,8 +217,23 @@ class Simulation:
 
         Raises RunStopped (status "diverged", "failed" or "invalid") or RunInterrupted
         (Ctrl-C), each carrying the Summary up to the last finished step; errors
-        before the first step (bad input) are plain TensormassErrors.
+        before the first step (bad input) are plain TensormassErrors. The files the
+        scene asks for are written in both cases (sim.data: the summary as written).
         """
+        if self.files is None:
+            return self._run()
+        try:
+            summary = self._run()
+        except RunStopped as stopped:
+            self.data = self.files.finish(stopped.summary, stopped)
+            raise
+        except BaseException:
+            self.files.abandon()
+            raise
+        self.data = self.files.finish(summary)
+        return summary
+
+    def _run(self) -> Summary:
         start = time.perf_counter()
         self._step = 0
         self._history = _History()
@@ -200,6 +247,8 @@ class Simulation:
                 if status == "invalid":
                     stopped = RunStopped, status, message
             except _WriterFailed as failure:              # disk full, permissions: the environment, not the run
+                raise failure.error from None
+            except _CallbackFailed as failure:            # the caller's on_step raised: theirs, as it was
                 raise failure.error from None
             except _Stop as stop:
                 stopped = RunStopped, "diverged", stop.message
@@ -244,6 +293,11 @@ class Simulation:
                 self._write(k, check.flag)
             if self.progress is not None:
                 self.progress(k, integ.n_steps)
+            if self.on_step is not None:
+                try:
+                    self.on_step(self)
+                except Exception as exc:
+                    raise _CallbackFailed(exc) from exc
 
     def _hint(self, k: int) -> str:
         """What the integrator can say about a divergence (explicit: dt against the stable step)."""
@@ -351,6 +405,30 @@ class Simulation:
             estimate=_estimate(model))
 
 
+def _run_files(scene, output, json, overwrite):
+    """The RunFiles of Simulation(scene, output=..., json=...), prepared; None: nothing to write."""
+    from .run_files import RunFiles
+    if isinstance(output, RunFiles):
+        output.prepare()
+        return output
+    if output is False:
+        if json is not None:
+            raise TensormassError("Simulation(output=False, json=...): output=False writes no file; drop one of them")
+        return None
+    if output not in (None, True) and not isinstance(output, (str, os.PathLike)):
+        raise TensormassError(f"Simulation(output=...) takes a folder, True/None (the scene's [output]) or False, "
+                              f"not {type(output).__name__}")
+    folder = None if output in (None, True) else output
+    if output is True and not scene.output.dir:
+        raise TensormassError("Simulation(output=True): the scene has no [output] dir; give output=\"folder\"")
+    if folder is None and not scene.output.dir and json is None:
+        return None
+    files = RunFiles(scene, out=folder, json_path=json, overwrite=overwrite,
+                     dir_from=None if folder is None else "given to Simulation(output=...), relative to the working directory")
+    files.prepare()
+    return files
+
+
 def _estimate(model):
     est = getattr(model, "estimate", None)
     return None if est is None else dict(est.to_dict(), text=est.describe())
@@ -362,6 +440,14 @@ class _Stop(Exception):
     def __init__(self, message: str):
         super().__init__(message)
         self.message = message
+
+
+class _CallbackFailed(Exception):
+    """on_step raised: re-raised as it was (not reported as a failed step)."""
+
+    def __init__(self, error: Exception):
+        super().__init__(str(error))
+        self.error = error
 
 
 class _WriterFailed(Exception):

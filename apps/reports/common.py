@@ -28,7 +28,7 @@ def measure(scene, trace=True) -> tuple:
     if trace:
         tracemalloc.start()
     try:
-        sim = Simulation(scene)
+        sim = Simulation(scene, output=False)
         summary = sim.run()
         peak = tracemalloc.get_traced_memory()[1] / 1e6 if trace else float("nan")
     finally:

@@ -126,7 +126,7 @@ class _Run:
         from ...runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
         try:
             scene = Scene.from_dict(scene_data)
-            self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0)
+            self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0, output=False)
             if u0 is not None:
                 self.min_det = min_det_F(sim.model, sim._u0)
                 self.max_u = float(np.abs(u0).max())

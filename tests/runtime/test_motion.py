@@ -375,7 +375,7 @@ def test_boundary_velocity_without_the_step_is_refused_when_boundaries_move():
 def test_the_twisted_bar_example_runs_and_turns_its_end_by_90_degrees():
     scene = Scene.from_toml(ROOT / "examples" / "twisted_bar" / "scene.toml")
     scene.output.dir = None
-    summary = Simulation(scene).run()
+    summary = Simulation(scene, output=False).run()
     assert summary.status == "ok"
     assert np.allclose(summary.probes["end_corner"], [0.0, -W, 0.0], atol=1e-14)   # (0.1, 0.1) -> (0, 0.1)
     mid = summary.probes["mid_corner"]                                                 # about 45 degrees
@@ -387,7 +387,7 @@ def test_the_dynamic_twisted_bar_example_rings_down_to_the_static_twist():
     static = Scene.from_toml(ROOT / "examples" / "twisted_bar" / "scene.toml")
     dynamic = Scene.from_toml(ROOT / "examples" / "twisted_bar" / "dynamic.toml")
     static.output.dir = dynamic.output.dir = None
-    a, b = Simulation(static).run(), Simulation(dynamic).run()
+    a, b = Simulation(static, output=False).run(), Simulation(dynamic, output=False).run()
     assert b.status == "ok"
     assert b.energy == pytest.approx(a.energy, rel=1e-3)         # held still, damped: the same equilibrium
     assert np.allclose(b.probes["end_corner"], a.probes["end_corner"], atol=1e-14)
@@ -397,7 +397,7 @@ def test_the_tool_press_example_follows_its_path():
     scene = Scene.from_toml(ROOT / "examples" / "tool_press" / "scene.toml")
     scene.output.dir = None
     scene.solver.dt, scene.solver.steps = 0.05, 36          # the same 1.8 s path in fewer steps
-    sim = Simulation(scene)
+    sim = Simulation(scene, output=False)
     tool = []
     sim.progress = lambda k, n: tool.append((sim.ctx.t, sim.model.probes["tool_centre"].value(sim.displacement)))
     summary = sim.run()

@@ -73,7 +73,7 @@ def test_the_organ_scene_loads_and_constraints_follow_the_groups():
 
 def test_the_organ_scene_runs():
     scene = Scene.from_toml(ORGAN / "scene.toml")
-    sim = Simulation(scene)
+    sim = Simulation(scene, output=False)
     summary = sim.run()
     assert summary.status == "ok"
     u = sim.displacement
@@ -99,7 +99,7 @@ def test_the_tool_scene_moves_the_cap_along_its_path():
     # examples/organ/tool.toml: the "loaded" cap follows the press/slide tables (first 3 steps here)
     scene = Scene.from_toml(ORGAN / "tool.toml")
     scene.solver.steps = 3
-    sim = Simulation(scene)
+    sim = Simulation(scene, output=False)
     summary = sim.run()
     assert summary.status == "ok"
     cap = region_nodes(sim.model.mesh, "loaded")

@@ -1,0 +1,139 @@
+"""The Python API writes what the scene's [output] asks, the same files as `tensormass run` (#14)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import tensormass as tm
+from tensormass.apps.cli import main
+from tensormass.runtime.model import Model
+from tensormass.runtime.output import SUMMARY_FORMAT
+
+SCENE = """
+name = "bar"
+[mesh]
+generate = "bar"
+size = [1.0, 0.2, 0.2]
+cells = [4, 1, 1]
+element = "hexahedron"
+[[material]]
+law = "stvk"
+quadrature = "gauss2"
+E = 1.0e6
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[solver]
+kind = "implicit_euler"
+dt = 0.01
+steps = 3
+[[probe]]
+name = "tip"
+point = [1.0, 0.1, 0.1]
+[output]
+dir = "frames"
+"""
+
+
+@pytest.fixture
+def scene_path(tmp_path):
+    path = tmp_path / "bar.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def _files(folder):
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_python_run_writes_the_same_files_as_the_command_line(scene_path, tmp_path, capsys):
+    assert main(["run", str(scene_path), "--out", str(tmp_path / "cli"), "--quiet"]) == 0
+    summary = tm.Simulation(tm.Scene.from_toml(scene_path), output=tmp_path / "api").run()
+    cli, api = tmp_path / "cli", tmp_path / "api"
+    assert _files(cli) == _files(api) == ["frame.pvd"] + [f"frame_{k:06d}.vtu" for k in range(4)] + ["summary.json"]
+    for name in _files(cli):
+        if name != "summary.json":              # timings differ; everything computed is bit-identical
+            assert (cli / name).read_bytes() == (api / name).read_bytes(), name
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (cli, api))
+    assert a["format"] == b["format"] == SUMMARY_FORMAT and set(a) == set(b)
+    assert a["probes"] == b["probes"] == json.loads(json.dumps(summary.to_dict()["probes"]))
+    assert b["output"]["dir"] == str(api) and b["output"]["frames"] == 4
+
+
+def test_scene_output_section_is_written_relative_to_the_scene_file(scene_path, tmp_path, monkeypatch):
+    elsewhere = tmp_path / "cwd"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    sim = tm.Simulation(tm.Scene.from_toml(scene_path))
+    sim.run()
+    folder = scene_path.parent / "frames"
+    assert "summary.json" in _files(folder) and "frame.pvd" in _files(folder)
+    assert sim.data["output"]["summary"] == str(folder / "summary.json")
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_output_false_writes_nothing(scene_path, tmp_path):
+    tm.Simulation(tm.Scene.from_toml(scene_path), output=False).run()
+    assert _files(tmp_path) == ["bar.toml"]
+
+
+def test_bad_output_arguments_are_refused(scene_path, tmp_path):
+    scene = tm.Scene.from_toml(scene_path)
+    with pytest.raises(tm.TensormassError, match="a Model has no scene"):
+        tm.Simulation(Model.from_scene(scene), output=tmp_path / "x")
+    scene.output.dir = None
+    with pytest.raises(tm.TensormassError, match="no \\[output\\] dir"):
+        tm.Simulation(scene, output=True)
+    with pytest.raises(tm.TensormassError, match="takes a folder"):
+        tm.Simulation(scene, output=3)
+
+
+def test_a_summary_json_that_is_not_ours_needs_overwrite(scene_path, tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    (folder / "summary.json").write_text("{}")
+    with pytest.raises(tm.TensormassError, match="not a tensormass summary.*overwrite"):
+        tm.Simulation(tm.Scene.from_toml(scene_path))
+    assert (folder / "summary.json").read_text() == "{}"
+    tm.Simulation(tm.Scene.from_toml(scene_path), overwrite=True).run()
+    assert json.loads((folder / "summary.json").read_text())["format"] == SUMMARY_FORMAT
+
+
+def test_on_step_sees_the_live_state_between_steps(scene_path):
+    seen = []
+
+    def on_step(sim):
+        seen.append((sim.step, sim.time, sim.displacement.copy(), sim.velocity.copy()))
+
+    sim = tm.Simulation(tm.Scene.from_toml(scene_path), output=False, on_step=on_step)
+    sim.run()
+    assert [s[0] for s in seen] == [1, 2, 3]
+    assert np.allclose([s[1] for s in seen], [0.01, 0.02, 0.03])
+    assert not np.array_equal(seen[0][2], seen[1][2])          # the state moves between calls
+    assert np.array_equal(seen[-1][2], sim.displacement)
+    assert np.abs(seen[-1][3]).max() > 0
+
+
+def test_an_exception_in_on_step_comes_back_as_it_was(scene_path, tmp_path):
+    def on_step(sim):
+        if sim.step == 2:
+            raise KeyError("viewer closed")
+
+    with pytest.raises(KeyError, match="viewer closed"):
+        tm.Simulation(tm.Scene.from_toml(scene_path), on_step=on_step).run()
+
+
+def test_public_names_and_version(capsys):
+    names = dir(tm)
+    for name in ("Scene", "Simulation", "load_kernel", "Kernel", "RunStopped", "TensormassError", "__version__"):
+        assert name in names
+        getattr(tm, name)
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"tensormass {tm.__version__}"
