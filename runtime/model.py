@@ -450,6 +450,18 @@ class Model:
         U = self.nodal(u)
         return {name: probe.value(U).tolist() for name, probe in self.probes.items()}
 
+    def probe_info(self) -> dict:
+        """How each probe reads the body (for the summary): its point and cell, or its nodes."""
+        out = {}
+        for name, probe in self.probes.items():
+            if probe.point is None:
+                out[name] = {"how": f"mean of the {probe.nodes.size} nodes of its region/box"}
+            else:
+                out[name] = {"point": np.asarray(probe.point).tolist(), "cell": int(probe.cell),
+                             "distance_outside": float(probe.distance),
+                             "how": "interpolated at the point with the shape functions of the cell holding it"}
+        return out
+
     # -- dofs that are not (only) displacements: bars, springs, shells (runtime.dofs) -------------
     def nodal(self, u: np.ndarray) -> np.ndarray:
         """(n_points, dofs_per_node) view of a global dof vector."""

@@ -64,6 +64,7 @@ class Summary:
     health: dict = field(default_factory=dict)     # runtime.health.HealthMonitor.summary()
     steps_done: int = 0                   # steps finished (== steps unless the run stopped)
     estimate: dict | None = None          # runtime.resources: memory and time estimated before allocating
+    probe_points: dict = field(default_factory=dict)   # how each probe reads the body (Model.probe_info)
 
     @property
     def exit_code(self) -> int:
@@ -402,7 +403,7 @@ class Simulation:
             adapt=None if self.adapter is None else self.adapter.summary(model),
             status=status, message=message, warnings=list(self.monitor.warnings),
             health=self.monitor.summary(), steps_done=self._step,
-            estimate=_estimate(model))
+            estimate=_estimate(model), probe_points=model.probe_info())
 
 
 def _run_files(scene, output, json, overwrite):

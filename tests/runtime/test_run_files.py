@@ -63,6 +63,8 @@ def test_python_run_writes_the_same_files_as_the_command_line(scene_path, tmp_pa
     assert a["format"] == b["format"] == SUMMARY_FORMAT and set(a) == set(b)
     assert a["probes"] == b["probes"] == json.loads(json.dumps(summary.to_dict()["probes"]))
     assert b["output"]["dir"] == str(api) and b["output"]["frames"] == 4
+    tip = b["probe_points"]["tip"]                       # the summary says how the probe reads the body
+    assert tip["point"] == [1.0, 0.1, 0.1] and tip["cell"] == 3 and "interpolated" in tip["how"]
 
 
 def test_scene_output_section_is_written_relative_to_the_scene_file(scene_path, tmp_path, monkeypatch):
