@@ -386,3 +386,23 @@ def test_fields_in_the_vtu_frames_read_back_with_meshio(tmp_path):
     assert set(listed.cell_data) == {"green_lagrange", "material", "energy_density"}
     assert listed.cell_data["material"][0].dtype.kind == "i"
     assert set(frames["none"].point_data) == {"displacement"} and not frames["none"].cell_data
+
+
+def test_simulation_fields_match_the_frames(tmp_path):
+    """Simulation.fields() at the end of a run = the last frame's data (same scene, same bits)."""
+    from tensormass.runtime.simulation import Simulation
+    scene_text = TINY + '[output]\nfields = ["von_mises", "cauchy_stress", "det_F_min", "law"]\n'
+    run_scene(Scene.from_string(scene_text), out=tmp_path, quiet=True)
+    frame = meshio.read(tmp_path / "frame_000001.vtu")
+    sim = Simulation(Scene.from_string(scene_text))
+    sim.run()
+    point, cell = sim.fields()
+    assert set(point) == {"von_mises", "cauchy_stress"} and set(cell) == {"von_mises", "cauchy_stress", "det_F_min", "law"}
+    for name, values in point.items():
+        assert np.array_equal(frame.point_data[name], values)
+    for name, values in cell.items():
+        assert np.array_equal(frame.cell_data[name][0], values)
+    _, only = sim.fields(["energy_density"])
+    assert set(only) == {"energy_density"} and np.all(only["energy_density"] > 0)
+    with pytest.raises(TensormassError, match=r"fields\[0\]: unknown field 'stress'"):
+        sim.fields(["stress"])
