@@ -65,6 +65,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [output]
     dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10
+    fields = ["von_mises", "cauchy_stress", "det_F_min"]   # the default; [] for none (runtime.fields.FIELDS)
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.

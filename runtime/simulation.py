@@ -116,7 +116,9 @@ class Simulation:
 
     writer: optional object with write_frame(step, time, points, displacement,
     fields) and close(), called at step 0, every output.every steps and at the
-    last step (and closed even when the run fails).  progress(step, n_steps) is
+    last step (and closed even when the run fails). A write_frame that takes
+    cell_fields (runtime.output.Writer does) also gets the scene's [output] fields
+    (runtime.fields): nodal ones in fields, cell ones in cell_fields.  progress(step, n_steps) is
     called after every step.  u0 / v0: optional initial displacement and velocity
     ((n_points, dim) or flat).
     """
