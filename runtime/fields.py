@@ -76,6 +76,10 @@ FIELDS = {f.name: f for f in (
 # elements are close to inverting. All three come from one stress kernel call per frame.
 DEFAULT_FIELDS = ("von_mises", "cauchy_stress", "det_F_min")
 
+# Elements per stress-kernel call when a frame's fields are evaluated (bounds the temporaries:
+# ~10 arrays of CHUNK x points x 9 doubles, 20 MB for hexahedra with 27 points).
+CHUNK = 1024
+
 # Fields another module computes (HOOK(react)): name -> what provides it.
 PROVIDED = {"reaction": "runtime.reactions"}
 
@@ -148,32 +152,35 @@ class FieldEvaluator:
         self._ids = {}
 
     # -- the pieces ---------------------------------------------------------------------------
-    def _records(self, u, asked) -> tuple:
-        """(per part: (cell ids, v (n, q), W, F3 (n, q, 3, 3), P3)) of the active cells."""
+    def _records(self, u, asked):
+        """Yields (cell ids, v (n, q), W, F3 (n, q, 3, 3), P3) of the active cells, part by part in
+        chunks of CHUNK elements (the temporaries of a frame stay small on big meshes)."""
         model = self.model
         U = model.nodal(np.asarray(u, dtype=float).reshape(-1))
-        out = []
         for part in model.parts:
             if part.n_active == 0:
                 continue
             kernel = part.kernel
             if not has_stress(kernel):
                 raise _no_stress(part, asked)
-            try:
-                S = kernel.stress(part.D_active, U[part.cells_active])
-            except ElementError as exc:           # global cell ids, not the part-local ones
-                message = str(exc).rsplit(": element(s)", 1)[0]
-                raise type(exc)(f"output fields: {message}", part.cell_ids_active[exc.elements]) from None
             layout, d = kernel.stress_record["offsets"], kernel.dim
-            F3 = np.zeros(S.shape[:2] + (3, 3))
-            P3 = np.zeros(S.shape[:2] + (3, 3))
-            F3[..., :d, :d] = S[..., layout["F"]:layout["F"] + d * d].reshape(S.shape[:2] + (d, d))
-            P3[..., :d, :d] = S[..., layout["P"]:layout["P"] + d * d].reshape(S.shape[:2] + (d, d))
-            if d == 2:                       # plane strain: F33 = 1, sigma33 from P33
-                F3[..., 2, 2] = 1.0
-                P3[..., 2, 2] = S[..., layout["P33"]]
-            out.append((part.cell_ids_active, S[..., layout["v"]], S[..., layout["W"]], F3, P3))
-        return out
+            for start in range(0, part.n_active, CHUNK):
+                rows = slice(start, start + CHUNK)
+                ids = part.cell_ids_active[rows]
+                try:
+                    S = kernel.stress(part.D_active[rows], U[part.cells_active[rows]])
+                except ElementError as exc:           # global cell ids, not the part-local ones
+                    message = str(exc).rsplit(": element(s)", 1)[0]
+                    raise type(exc)(f"output fields: {message}", ids[exc.elements]) from None
+                shape = S.shape[:2]
+                F3 = np.zeros(shape + (3, 3))
+                P3 = np.zeros(shape + (3, 3))
+                F3[..., :d, :d] = S[..., layout["F"]:layout["F"] + d * d].reshape(shape + (d, d))
+                P3[..., :d, :d] = S[..., layout["P"]:layout["P"] + d * d].reshape(shape + (d, d))
+                if d == 2:                       # plane strain: F33 = 1, sigma33 from P33
+                    F3[..., 2, 2] = 1.0
+                    P3[..., 2, 2] = S[..., layout["P33"]]
+                yield ids, S[..., layout["v"]], S[..., layout["W"]], F3, P3
 
     def _ids_of(self, name: str) -> np.ndarray:
         """material, law or region of every cell (global order); law switching changes `law`."""

@@ -250,7 +250,8 @@ def test_mixed_mesh_cell_values_ids_and_nodal_volume_average(python_kernels):
     assert mixed_nodes                                       # some nodes average across the two laws
 
 
-def test_law_switched_cells_use_their_current_law(python_kernels):
+def test_law_switched_cells_use_their_current_law(python_kernels, monkeypatch):
+    monkeypatch.setattr(fm, "CHUNK", 4)                      # parts of 10 and 2 cells: several chunks
     mesh = Scene.from_string(TINY).load_mesh()
     for law in ("stvk", "neohookean"):
         python_kernels("tetra", law)
