@@ -13,13 +13,14 @@ from ..generator import GENERATOR_VERSION     # a constant: generator/__init__.p
 METADATA_KEYS = (
     "name", "element", "law", "quadrature", "dim", "n_nodes", "n_points", "n_constants",
     "n_dofs", "dofs_per_node", "point_stride", "point_fields", "material_offset",
-    "parameters", "requires_positive_J", "recompute", "ops", "templates",
+    "parameters", "requires_positive_J", "recompute", "ops", "templates", "stress_record",
 )
 
 # The entry points every loaded kernel provides (signatures: see the templates);
-# forces_and_stiffness_scatter is the fused evaluation and scatter into global arrays.
+# forces_and_stiffness_scatter is the fused evaluation and scatter into global arrays;
+# stress(D, u, S, flags) writes one record per element and point (metadata "stress_record").
 KERNEL_FUNCTIONS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness",
-                    "forces_and_stiffness_scatter")
+                    "forces_and_stiffness_scatter", "stress")
 
 
 class BackendError(Exception):

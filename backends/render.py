@@ -26,7 +26,8 @@ def metadata(ir, backend) -> dict:
     per point q, D[q * point_stride + point_fields[f]] starts field f (v: the weight x det J,
     G: the shape gradients, node-major, G[i][b] at + i * dim + b); the material
     constants start at material_offset. Recompute kernels store rest coordinates instead
-    (point_stride 0, no point fields)."""
+    (point_stride 0, no point fields). stress_record: the layout of the stress kernel's
+    per-point record ({"size", "offsets": {v, W, F, P(, P33)}}, generator.kernel_body)."""
     return {
         "name": ir.name,
         "element": ir.element,
@@ -46,6 +47,7 @@ def metadata(ir, backend) -> dict:
         "recompute": bool(ir.recompute),
         "ops": dict(sorted(ir.ops.items())),
         "templates": backend.templates_hash()[:16],
+        "stress_record": ir.stress_record,
     }
 
 

@@ -24,6 +24,7 @@ class LawDerivatives:
     W: sp.Expr          # energy density
     P: tuple            # dim x dim, first Piola-Kirchhoff stress dW/dF
     A: dict             # {(ab, cd): d2W/dF_ab dF_cd} for flat indices ab <= cd only
+    P33: sp.Expr | None  # 2D (plane strain) only: the out-of-plane stress dW/dF33 at F33 = 1
 
     def A_entry(self, a, b, c, d) -> sp.Expr:
         ab, cd = a * self.dim + b, c * self.dim + d
@@ -40,6 +41,15 @@ def law_derivatives(law, dim: int) -> LawDerivatives:
     P = [sp.diff(W, s) for s in flat]
     # The Hessian is symmetric: differentiate each pair once.
     A = {(i, j): sp.diff(P[i], flat[j]) for i in range(len(flat)) for j in range(i, len(flat))}
+    P33 = None
+    if dim == 2:
+        # The embedded F33 = 1 is a constant of the unknowns, but the out-of-plane stress (which
+        # plane-strain Cauchy sigma33 and von Mises need) is dW/dF33 there: differentiate the law
+        # with F33 a symbol (F22 in 0-based names, free in 2D), then put F33 = 1 back.
+        F33 = sp.Symbol("F22", real=True)
+        F3_free = F3.copy()
+        F3_free[2, 2] = F33
+        P33 = sp.diff(law.energy(F3_free, **params), F33).subs(F33, 1)
     return LawDerivatives(
         dim=dim,
         F=tuple(tuple(row) for row in F),
@@ -48,4 +58,5 @@ def law_derivatives(law, dim: int) -> LawDerivatives:
         W=W,
         P=tuple(tuple(P[a * dim:(a + 1) * dim]) for a in range(dim)),
         A=A,
+        P33=P33,
     )

@@ -22,7 +22,7 @@ from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, split
-from .kernel_body import build_bodies
+from .kernel_body import build_bodies, stress_record
 from .quadrature import QuadratureRule, rule as get_rule, rule_for_degree
 
 EXACT = "exact"
@@ -49,7 +49,7 @@ class KernelIR:
     dN_table: tuple              # [point][node][k] reference shape gradients at the points
     weights: tuple               # quadrature weights
     material: Fragment           # material constants from the parameters
-    law_code: dict               # variant -> list[Fragment]: energy, gradient, tangent, gradient_tangent
+    law_code: dict               # variant -> list[Fragment]: energy, gradient, tangent, gradient_tangent, stress
     J: sp.Expr | None            # det F from the F symbols, for the inversion check
     chain: dict                  # chain-rule statements (forces, tangent H, stiffness K)
     rule_points: tuple
@@ -58,6 +58,7 @@ class KernelIR:
     ops: dict                    # floating-point operations per element, per kernel
     input_hash: str              # hash of element, rule, law source, generator version
     bodies: dict                 # kind -> statement tree of one element (generator/kernel_body.py)
+    stress_record: dict          # layout of the stress kernel's per-point record (kernel_body.stress_record)
 
     @property
     def dofs_per_node(self) -> int:
@@ -156,6 +157,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         rule_points=tuple(tuple(float(x) for x in p) for p in rule.points),
         rule_weights=tuple(float(w) for w in rule.weights),
         recompute=recompute,
+        stress_record=stress_record(dim),
     )
     # Everything derived is computed before the IR exists: it is never patched afterwards.
     draft = SimpleNamespace(**fields, n_dofs=n * dim, dofs_per_node=dim)
@@ -178,7 +180,10 @@ def _law_code(deriv, law, max_ops):
     dim = deriv.dim
     P = [(f"P{a}{b}", deriv.P[a][b]) for a in range(dim) for b in range(dim)]
     A = [(f"A{i}_{j}", e) for (i, j), e in sorted(deriv.A.items())]
-    everything = [("W", deriv.W)] + P + A
+    # 2D: the out-of-plane stress P33 (named P22, 0-based) of plane strain, for the stress kernel;
+    # last in the list, so that the constants it hoists come after every earlier one.
+    out_of_plane = [("P22", deriv.P33)] if deriv.P33 is not None else []
+    everything = [("W", deriv.W)] + P + A + out_of_plane
     # Hoist parameter-only subexpressions once, over every output, so all
     # variants share one set of material constants.
     hoisted, constants = hoist([e for _, e in everything], set(deriv.params))
@@ -190,6 +195,8 @@ def _law_code(deriv, law, max_ops):
         "gradient": Pn,
         "tangent": An,
         "gradient_tangent": Pn + An,
+        # the stress kernel's record: W, P (and P33 in 2D) at one point, in one fragment
+        "stress": [("W", named["W"])] + Pn + [(name, named[name]) for name, _ in out_of_plane],
     }
     law_code = {k: split(v, f"t_{k[0]}", max_ops) for k, v in variants.items()}
     # Material constants: the raw parameters the code still reads, then the hoisted ones.
@@ -245,6 +252,7 @@ def _op_counts(ir) -> dict:
         "forces": nq * (F + J + law["gradient"] + forces),
         "stiffness": nq * (F + J + law["tangent"] + H + K),
         "forces_and_stiffness": nq * (F + J + law["gradient_tangent"] + forces + H + K),
+        "stress": nq * (F + J + law["stress"]),
     }
 
 

@@ -1,7 +1,7 @@
 """The kernel algorithm as data: a small language-neutral statement tree, built once per IR.
 
-Each kernel function (constants, energy, forces, stiffness, forces_and_stiffness) is the body
-of a loop over elements, given here as statements over sympy expressions:
+Each kernel function (constants, energy, forces, stiffness, forces_and_stiffness, stress) is the
+body of a loop over elements, given here as statements over sympy expressions:
 
     Loop(var, start, stop, body)       for var in [start, stop)
     Declare(name, value)               a new local (mutable when it is accumulated later;
@@ -14,8 +14,8 @@ of a loop over elements, given here as statements over sympy expressions:
     Comment(text)
 
 Array elements are Ref(array, index, ...) sympy functions over the loop variables; the arrays
-are the kernel arguments of the current element (X, params, D, u, f, K, out, and cells, pos of the
-fused kernel), the global arrays of the fused kernel (U: nodal displacements (n_points, dim),
+are the kernel arguments of the current element (X, params, D, u, f, K, out, S: the stress kernel's
+records (n_points, stress_record size), and cells, pos of the fused kernel), the global arrays of the fused kernel (U: nodal displacements (n_points, dim),
 fg: global forces, data: global CSR values), the tables (DN, WEIGHTS) and per-call scratch
 (Gq of recompute kernels; ul, fl, Kl: one element's u, f and K in the fused kernel).
 
@@ -106,9 +106,30 @@ class FlagIf:
     flag: int
 
 
-KINDS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness", "forces_and_stiffness_scatter")
+KINDS = ("constants", "energy", "forces", "stiffness", "forces_and_stiffness", "forces_and_stiffness_scatter",
+         "stress")
 LAW_VARIANT = {"energy": "energy", "forces": "gradient", "stiffness": "tangent",
-               "forces_and_stiffness": "gradient_tangent", "forces_and_stiffness_scatter": "gradient_tangent"}
+               "forces_and_stiffness": "gradient_tangent", "forces_and_stiffness_scatter": "gradient_tangent",
+               "stress": "stress"}
+
+
+def stress_record(dim: int) -> dict:
+    """The layout of one record of the stress kernel: what it writes per element and point.
+
+    S[e, q, offsets[name] + k] for name in
+      v    the point's rest volume w det J (m^3; area x unit thickness in 2D)
+      W    the energy density per rest volume (J/m^3)
+      F    the deformation gradient, dim x dim row-major (F[a][b] at + a * dim + b)
+      P    the first Piola-Kirchhoff stress dW/dF, dim x dim row-major (Pa)
+      P33  2D only (plane strain, F33 = 1): the out-of-plane stress dW/dF33 (Pa)
+    Every stress and strain field follows from these, law-independently (runtime/fields.py).
+    The generated files export this dict in their metadata ("stress_record"); the runtime reads
+    it from there, never from here (loading a kernel imports no generator)."""
+    offsets, at = {}, 0
+    for name, size in (("v", 1), ("W", 1), ("F", dim * dim), ("P", dim * dim)) + ((("P33", 1),) if dim == 2 else ()):
+        offsets[name] = at
+        at += size
+    return {"size": at, "offsets": offsets}
 # The arrays u, f, K of each kernel: the element's rows of the arguments, or (fused) one-element scratch.
 ARRAYS = {"u": "u", "f": "f", "K": "K"}
 FUSED_ARRAYS = {"u": "ul", "f": "fl", "K": "Kl"}
@@ -260,6 +281,20 @@ class _Builder:
         out += [Assign(ref("D", ir.material_offset + k), e) for k, (_, e) in enumerate(ir.material.outputs)]
         return tuple(out)
 
+    def stress(self):
+        """Per point, the record of stress_record(dim) into S[e, q, :]: no forces, no stiffness."""
+        d, layout = self.dim, stress_record(self.dim)["offsets"]
+        values = [("v", [_s("v")]), ("W", [_s("W")]),
+                  ("F", [_s(f"F{a}{b}") for a in range(d) for b in range(d)]),
+                  ("P", [_s(f"P{a}{b}") for a in range(d) for b in range(d)])]
+        if d == 2:
+            values.append(("P33", [_s("P22")]))
+        record = [Comment("The stress record of this point (generator/kernel_body.stress_record).")]
+        record += [Assign(ref("S", q, layout[name] + k), value) for name, column in values
+                   for k, value in enumerate(column)]
+        body = self.deformation_gradient() + self.law("stress") + record
+        return tuple(self.material()) + (Loop("q", 0, self.ir.n_points, tuple(body)),)
+
     def point_loop(self, kind):
         body = self.deformation_gradient() + self.law(LAW_VARIANT[kind])
         if kind == "energy":
@@ -273,6 +308,8 @@ class _Builder:
     def kernel(self, kind):
         if kind == "constants":
             return self.constants()
+        if kind == "stress":
+            return self.stress()
         if kind == "forces_and_stiffness_scatter":
             self.names = FUSED_ARRAYS
             try:

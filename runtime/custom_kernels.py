@@ -49,6 +49,11 @@ class Kernel(Protocol):
       min_det_F(D, u, cells=None), inverted(D, u, cells=None): the health monitor's and the
       positive-J laws' inversion checks (a kernel without them is not checked for inversion);
       raise runtime.errors.ElementError subclasses with part-local element ids for bad elements.
+      stress(D, u) -> (n, n_points, stress_record["size"]) with the attribute stress_record
+      ({"size", "offsets": {"v", "W", "F", "P"(, "P33" in 2D)}}, as the generated kernels'
+      metadata): the output fields' records (runtime.fields). A kernel without it gives no stress
+      or strain fields: a scene that asks for them is refused (naming the kernel), and the
+      default [output] fields leave them out.
     """
     element: str
     law: str

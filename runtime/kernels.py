@@ -3,6 +3,7 @@
     k = load_kernel("tetra", "stvk", "gauss1", backend="numba")
     D = k.constants(X, E=1e6, nu=0.3)      # per-element constants, once
     f, K = k.forces_and_stiffness(D, u)    # every step
+    S = k.stress(D, u)                     # per point v, W, F, P (output fields, runtime.fields)
     k.forces_and_stiffness_scatter(D, U, cells, pos, f_global, data)   # fused: straight into CSR values
 
 A kernel comes from the committed catalogue (tensormass.generated); a
@@ -56,6 +57,10 @@ class Kernel:
         self.material_offset = int(meta["material_offset"])
         # "recompute" kernels (a generator option) keep rest coordinates in D instead of G.
         self.recompute = bool(meta["recompute"])
+        # What stress() writes per element and point: {"size", "offsets": {v, W, F, P(, P33)}}
+        # (generator.kernel_body.stress_record, exported by every generated file).
+        self.stress_record = {"size": int(meta["stress_record"]["size"]),
+                              "offsets": dict(meta["stress_record"]["offsets"])}
 
     def point_volumes(self, D) -> np.ndarray:
         """(n_elem, n_points) integration weights x det J, read from the constants."""
@@ -216,6 +221,19 @@ class Kernel:
         self.module.forces_and_stiffness(D, u, f, K, flags)
         self._check(flags, "forces_and_stiffness")
         return f, K
+
+    def stress(self, D, u, out=None, flags=None) -> np.ndarray:
+        """(n_elem, n_points, stress_record["size"]) records: per element and integration point the
+        rest volume v = w det J, the energy density W, F and P = dW/dF (dim x dim, row-major) and,
+        in 2D (plane strain), P33; offsets in self.stress_record. runtime.fields derives the
+        output fields from them."""
+        D, u = self._displacements(D, u)
+        n = len(D)
+        S = self._buffer(out, (n, self.n_points, self.stress_record["size"]), "stress out=")
+        flags = self._flags(flags, n)
+        self.module.stress(D, u, S, flags)
+        self._check(flags, "stress")
+        return S
 
     def forces_and_stiffness_scatter(self, D, U, cells, pos, f, data, flags=None, check: bool = True) -> None:
         """Fused evaluation and scatter: f += the element forces, data += the element stiffness

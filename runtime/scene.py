@@ -65,6 +65,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [output]
     dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10
+    fields = ["von_mises", "cauchy_stress", "det_F_min"]   # the default; [] for none (runtime.fields.FIELDS)
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.
@@ -81,6 +82,7 @@ from .. import laws
 from ..backends import BACKENDS
 from ..generator.catalogue import entries
 from .errors import SceneError
+from .fields import FIELDS, check_names as check_field_names
 from .mesh import BAR_ELEMENTS, COORD_MAX
 from .motion import Amplitude, Rotation, check_amplitude_use, parse_amplitude, parse_rotation
 from .paths import scene_path
@@ -195,6 +197,7 @@ class Probe:
 class Output:
     dir: str | None = None                # None: no files written
     every: int = 1
+    fields: tuple | None = None           # names from runtime.fields.FIELDS; None: its DEFAULT_FIELDS
 
 
 @dataclass
@@ -330,7 +333,7 @@ _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass", "rho_inf", "threads")
 _PROBE = ("name", "point", "region", "box")
-_OUTPUT = ("dir", "every")
+_OUTPUT = ("dir", "every", "fields")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
@@ -825,6 +828,11 @@ class _Parser:
             out.dir = scene_path(out.dir, self.scene_dir)
         if "every" in t:
             out.every = self.integer(t["every"], "output.every", 1)
+        if "fields" in t:                 # [] for none; names checked against runtime.fields.FIELDS
+            if not isinstance(t["fields"], list):
+                raise SceneError(f"output.fields: expected an array of field names, got {_type_name(t['fields'])} "
+                                 f"(known fields: {', '.join(FIELDS)})")
+            out.fields = check_field_names(t["fields"], "output.fields", SceneError)
         return out
 
 

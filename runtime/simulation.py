@@ -20,6 +20,7 @@ from . import parallel as _parallel
 from .adapt import MAX_STATIC_PASSES, Adapter
 from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, RunStopped,
                      TensormassError)
+from . import fields as _fields
 from .health import HealthMonitor
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
@@ -65,6 +66,7 @@ class Summary:
     steps_done: int = 0                   # steps finished (== steps unless the run stopped)
     estimate: dict | None = None          # runtime.resources: memory and time estimated before allocating
     probe_points: dict = field(default_factory=dict)   # how each probe reads the body (Model.probe_info)
+    fields: dict | None = None            # output fields of the frames: names, units, law_ids (runtime.fields)
 
     @property
     def exit_code(self) -> int:
@@ -121,7 +123,9 @@ class Simulation:
     file (like --json); overwrite: like --overwrite. A Model (no scene) writes nothing
     unless writer is given: an object with write_frame(step, time, points,
     displacement, fields) and close(), called at step 0, every output.every steps and
-    at the last step (and closed even when the run fails).
+    at the last step (and closed even when the run fails). A write_frame that takes
+    cell_fields (runtime.output.Writer does) also gets the scene's [output] fields
+    (runtime.fields): nodal ones in fields, cell ones in cell_fields.
 
     progress(step, n_steps) is called after every step; on_step(sim) too, after it:
     between steps the live state is readable (sim.step, sim.time, sim.displacement,
@@ -159,6 +163,7 @@ class Simulation:
         self.ctx = None
         self.stable_dt = None
         self.summary = None
+        self._evaluator = None                   # runtime.fields.FieldEvaluator of the current model
 
     def _initial(self, x):
         if x is None:
@@ -195,6 +200,28 @@ class Simulation:
         v = self.ctx.v if self.ctx is not None else np.zeros(self.model.n_dofs)
         return np.array(self.model.split_dofs(v)[0])
 
+    def fields(self, names=None) -> tuple:
+        """(point_fields, cell_fields) at the current state: dicts name -> array (runtime.fields:
+        names from FIELDS; None: the scene's [output] fields). Cell arrays in the mesh's block order."""
+        if self._evaluator is None or self._evaluator.model is not self.model:   # refinement: a new model
+            self._evaluator = _fields.FieldEvaluator(self.model)
+        names = _fields.resolve(self.model, names)
+        return self._evaluator.evaluate(self.dofs.ravel(), names, self._field_providers())
+
+    def _field_providers(self) -> dict:
+        """Fields other modules compute: name -> callable() giving the nodal array at the current state."""
+        providers = {}
+        # HOOK(react): providers["reaction"] = <callable: nodal reaction forces (n_points, dim) of
+        # runtime.reactions at the current state>; runtime.fields lists `reaction` and calls it.
+        return providers
+
+    def _frame_fields(self) -> tuple:
+        """The scene's fields for a frame: names, or () when there are none or the writer takes no
+        cell_fields (a simple write_frame(step, t, X, u, fields) gets what it always got)."""
+        if self.writer is None or not _takes(self.writer.write_frame, "cell_fields"):
+            return ()
+        return _fields.resolve(self.model, None)
+
     # -- run --------------------------------------------------------------------------------------
     def _prepare(self):
         """Everything before the first step: assembly pattern, compilation, initial state."""
@@ -211,6 +238,8 @@ class Simulation:
             self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
         self.monitor = HealthMonitor(ctx, dynamic=model.solver.kind != "static",
                                      duration=getattr(self.integrator, "duration", None))
+        # the frames' fields can be computed (kernels with stress(), providers): refused before step 1
+        _fields.check_available(model, self._frame_fields(), self._field_providers())
         ctx.asm.time = ctx.linear.time = 0.0         # stepping costs only from here on
 
     def run(self) -> Summary:
@@ -380,6 +409,11 @@ class Simulation:
         extra = {} if flag is None else {"flag": flag}
         if self.adapter is not None:          # watch the criteria and the law of each cell in ParaView
             extra["cell_fields"] = self.adapter.cell_fields(self.ctx)
+        names = self._frame_fields()          # [output] fields (runtime.fields): nodal and cell data
+        if names:
+            point, cell = self.fields(names)
+            fields.update(point)
+            extra["cell_fields"] = {**extra.get("cell_fields", {}), **cell}
         try:
             self.writer.write_frame(step, self.ctx.t, self.model.mesh.points, self.displacement, fields, **extra)
         except Exception as exc:
@@ -403,7 +437,14 @@ class Simulation:
             adapt=None if self.adapter is None else self.adapter.summary(model),
             status=status, message=message, warnings=list(self.monitor.warnings),
             health=self.monitor.summary(), steps_done=self._step,
-            estimate=_estimate(model), probe_points=model.probe_info())
+            estimate=_estimate(model), probe_points=model.probe_info(),
+            fields=self._fields_summary())
+
+    def _fields_summary(self):
+        names = self._frame_fields()
+        if not names:
+            return None
+        return {"names": list(names), "law_ids": self.model.law_names(), "fields": _fields.describe(names)}
 
 
 def _run_files(scene, output, json, overwrite):
@@ -428,6 +469,16 @@ def _run_files(scene, output, json, overwrite):
                      dir_from=None if folder is None else "given to Simulation(output=...), relative to the working directory")
     files.prepare()
     return files
+
+
+def _takes(function, keyword: str) -> bool:
+    """Whether a callable accepts the keyword argument (by name or through **kwargs)."""
+    import inspect
+    try:
+        params = inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        return False
+    return keyword in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
 def _estimate(model):

@@ -249,6 +249,7 @@ void {prefix}_stiffness(long n, const double *D, const double *u, double *K, int
 void {prefix}_forces_and_stiffness(long n, const double *D, const double *u, double *f, double *K, int *flags);
 void {prefix}_forces_and_stiffness_scatter(long n, const double *D, const double *U, const long *cells,
     const int *pos, double *fg, double *data, int *flags);
+void {prefix}_stress(long n, const double *D, const double *u, double *S, int *flags);
 """
 
 
@@ -269,6 +270,7 @@ class CModule:
         self._n_dofs = int(meta["n_dofs"])
         self._n_constants = int(meta["n_constants"])
         self._n_parameters = len(meta["parameters"])
+        self._n_record = int(meta["n_points"]) * int(meta["stress_record"]["size"])
 
     def __repr__(self):
         return f"<C kernel {self.NAME} from {self.LIBRARY}>"
@@ -319,6 +321,12 @@ class CModule:
             self._double(f, self._n_dofs, n, "f", True), self._double(K, self._n_dofs ** 2, n, "K", True),
             self._flags(flags, n))
 
+    def stress(self, D, u, S, flags):
+        """S (n, n_points, stress_record size): one record per element and point (the metadata's layout)."""
+        n = len(D)
+        self._functions["stress"](
+            n, self._double(D, self._n_constants, n, "D"), self._double(u, self._n_dofs, n, "u"),
+            self._double(S, self._n_record, n, "S", True), self._flags(flags, n))
 
     def forces_and_stiffness_scatter(self, D, U, cells, pos, fg, data, flags):
         """The fused evaluation and scatter (see the C template): U (n_points, dim) float64,

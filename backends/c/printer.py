@@ -73,6 +73,7 @@ class CStatements(StatementPrinter):
         # array -> (pointer name, row lengths for flattening; None: a C multi-dimensional table)
         self.arrays = {"X": ("Xe", (d,)), "params": ("pe", ()), "D": ("De", ()), "u": ("ue", (d,)),
                        "f": ("fe", ()), "K": ("Ke", (n_dofs,)), "Gq": ("Gq", (d,)), "out": ("out", ()),
+                       "S": ("Se", (ir.stress_record["size"],)),
                        "DN": ("DN", None), "WEIGHTS": ("WEIGHTS", None),
                        # the fused kernel: element rows of cells and pos, global arrays, scratch
                        "cells": ("ce", ()), "pos": ("Pe", (ir.n_nodes,)), "U": ("U", (d,)),

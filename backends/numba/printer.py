@@ -9,7 +9,7 @@ from ..render import environment, metadata_json, tables
 from ..statements import IndexPrinter, RefPrinting, StatementPrinter
 
 # Arrays of the current element: their first index is the element e.
-PER_ELEMENT = ("X", "params", "D", "u", "f", "K", "out", "cells", "pos")
+PER_ELEMENT = ("X", "params", "D", "u", "f", "K", "out", "cells", "pos", "S")
 
 
 class NumbaPrinter(RefPrinting, DoubleLiterals, PythonCodePrinter):

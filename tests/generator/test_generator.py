@@ -108,7 +108,7 @@ def test_ir_records_counts_and_layout():
     ir = build_ir("hexahedron", "stvk", "gauss2")
     assert ir.n_points == 8 and ir.point_stride == 1 + 8 * 3
     assert ir.n_constants == 8 * 25 + len(ir.material_names)
-    assert set(ir.ops) == {"constants", "energy", "forces", "stiffness", "forces_and_stiffness"}
+    assert set(ir.ops) == {"constants", "energy", "forces", "stiffness", "forces_and_stiffness", "stress"}
     assert ir.ops["forces"] < ir.ops["forces_and_stiffness"]
 
 

@@ -1,0 +1,65 @@
+"""The generated stress kernel: C = numba, and its record holds what its layout says.
+
+The record (generator.kernel_body.stress_record, exported as metadata "stress_record") is checked
+against quantities computed here from the other kernel outputs: v against point_volumes(D),
+F = I + sum_i u_i (x) G_i from point_gradients(D), the volume-weighted W against energy(), and
+the chain rule f_i = -sum_q v P G_i against forces(): so the layout, F, P and W cannot drift
+apart from the kernels the solver uses. The analytic values per law (P33 of plane strain
+included) are in tests/runtime/test_fields.py."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import tensormass as tm
+from tensormass.generator.catalogue import entries
+from tensormass.generator.kernel_body import stress_record
+
+from helpers import random_elements, relative_error
+
+# 3D and 2D, linear and quadratic, three laws; all compiled by test_backends_agree already.
+# CI's regeneration step (TENSORMASS_ALL_BACKENDS=1) compares C and numba on every entry.
+ENTRIES = [("hexahedron", "neohookean", "gauss2"), ("triangle", "mooney_rivlin", "gauss1"),
+           ("tetra10", "stvk", "exact")]
+SELECTED = ([(e.element, e.law, e.quadrature) for e in entries()]
+            if os.environ.get("TENSORMASS_ALL_BACKENDS") == "1" else ENTRIES)
+
+
+def _state(kernel, n=11, seed=3, straight=False):
+    X = random_elements(kernel.element, n, seed=seed, straight=straight)
+    D = kernel.constants(X, E=2.0, nu=0.3)
+    u = 0.04 * np.random.default_rng(seed).standard_normal((n, kernel.n_nodes, kernel.dim))
+    return D, u
+
+
+@pytest.mark.parametrize("entry", SELECTED, ids=["_".join(e) for e in SELECTED])
+def test_stress_c_equals_numba(entry):
+    numba = tm.load_kernel(*entry, backend="numba")
+    c = tm.load_kernel(*entry, backend="c")
+    D, u = _state(numba, straight=entry[2] == "exact")
+    Sn, Sc = numba.stress(D, u), c.stress(D, u)
+    assert Sn.shape == (len(D), numba.n_points, numba.stress_record["size"])
+    assert relative_error(Sc, Sn) < 1e-12
+
+
+@pytest.mark.parametrize("entry", ENTRIES, ids=["_".join(e) for e in ENTRIES])
+def test_record_matches_the_other_kernels(entry):
+    k = tm.load_kernel(*entry, backend="numba")
+    d = k.dim
+    assert k.stress_record == stress_record(d)
+    assert ("P33" in k.stress_record["offsets"]) == (d == 2)
+    at = k.stress_record["offsets"]
+    D, u = _state(k, straight=entry[2] == "exact")
+    S = k.stress(D, u)
+    v = S[..., at["v"]]
+    assert relative_error(v, k.point_volumes(D)) < 1e-14
+    G = k.point_gradients(D)                                        # (n, q, nodes, dim)
+    F = np.eye(d) + np.einsum("nia,nqib->nqab", u, G)
+    assert relative_error(S[..., at["F"]:at["F"] + d * d].reshape(F.shape), F) < 1e-13
+    assert relative_error((v * S[..., at["W"]]).sum(axis=1), k.energy(D, u)) < 1e-12
+    P = S[..., at["P"]:at["P"] + d * d].reshape(F.shape)
+    f = -np.einsum("nq,nqab,nqib->nia", v, P, G).reshape(len(D), -1)
+    assert relative_error(f, k.forces(D, u)) < 1e-12
+
