@@ -65,8 +65,13 @@ def entry_name(entry, i: int) -> str:
 class _Group:
     """One [[fixed]] entry: the dofs it owns (first entry wins), their nodes and components, the point."""
 
-    def __init__(self, name, dofs, nodes, comps, point):
-        self.name, self.dofs, self.nodes, self.comps, self.point = name, dofs, nodes, comps, point
+    def __init__(self, name, dofs, dofs_per_node, n_comp, point):
+        self.name, self.dofs, self.point = name, dofs, point
+        self.nodes, self.comps = dofs // dofs_per_node, dofs % dofs_per_node
+        # per distinct node: which displacement components the entry owns (for evaluate)
+        self.unique, where = np.unique(self.nodes, return_inverse=True)
+        self.mask = np.zeros((self.unique.size, n_comp))
+        self.mask[where, self.comps] = 1.0
 
 
 class Reactions:
@@ -100,7 +105,7 @@ class Reactions:
             dofs = np.sort(dofs[~claimed[dofs]])
             claimed[dofs] = True
             point = self._point(f, nodes, key)
-            self.groups.append(_Group(names[i], dofs, dofs // dpn, dofs % dpn, point))
+            self.groups.append(_Group(names[i], dofs, dpn, self.n_comp, point))
 
     def _point(self, entry, nodes, key) -> np.ndarray:
         about = getattr(entry, "moment_about", None)
@@ -119,14 +124,15 @@ class Reactions:
     def evaluate(self, r: np.ndarray, u: np.ndarray) -> dict:
         """{name: {"force": (dim,), "moment": (3,) or float (2D), "point": (dim,)}} from the residual r."""
         model = self.model
-        U = model.nodal(u)
+        U, R = model.nodal(u), model.nodal(r)
+        nc = self.n_comp
         out = {}
         for g in self.groups:
-            nodal = np.zeros((g.dofs.size, self.dim))
-            nodal[np.arange(g.dofs.size), g.comps] = r[g.dofs]
+            nodal = np.zeros((g.unique.size, self.dim))
+            nodal[:, :nc] = R[g.unique, :nc] * g.mask
             force = nodal.sum(axis=0)
-            arm = model.mesh.points[g.nodes] - g.point
-            arm[:, :self.n_comp] += U[g.nodes, :self.n_comp]
+            arm = model.mesh.points[g.unique] - g.point
+            arm[:, :nc] += U[g.unique, :nc]
             if self.dim == 3:
                 moment = np.cross(arm, nodal).sum(axis=0)
             else:
