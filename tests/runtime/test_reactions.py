@@ -272,3 +272,25 @@ def test_the_state_evaluation_matches_the_solvers_residual():
     before = sim.reactions()["fixed[0]"]["force"]
     sim.ctx.u = sim.ctx.u * 1.01
     assert not np.allclose(sim.reactions()["fixed[0]"]["force"], before, rtol=1e-4)
+
+
+def test_entries_selecting_mesh_regions(tmp_path):
+    """[[fixed]] by a mesh group (tests/runtime/test_mesh_regions.py's bar: 'clamp' at x = 0, 'tip' at x = 1)."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_mesh_regions import write_bar
+    from tensormass.runtime.mesh import read_mesh
+    from tensormass.runtime.model import Model
+
+    mesh = read_mesh(write_bar(tmp_path / "bar.msh", element="hexahedron"))
+    fixed = [Fixed(box=None, region="clamp", name="clamp"), Fixed(box=None, region="tip", components=(2,), name="tip")]
+    model = Model(mesh, [Material(law="hooke", quadrature="gauss2", E=1e6, nu=0.3, density=RHO)], fixed=fixed,
+                  loads=Loads(gravity=(0.0, 0.0, -G)))
+    sim = Simulation(model)
+    sim.run()
+    r = sim.reactions()
+    weight = RHO * G * 1.0 * 0.2 * 0.2
+    assert r["tip"]["force"][0] == r["tip"]["force"][1] == 0.0 and r["tip"]["force"][2] > 0
+    np.testing.assert_allclose(r["clamp"]["force"] + r["tip"]["force"], [0.0, 0.0, weight], atol=1e-8 * weight)
+    np.testing.assert_allclose(r["tip"]["point"], [1.0, 0.1, 0.1])
