@@ -60,6 +60,9 @@ class Context:
         self.t = 0.0
         self.newton_iterations = 0
         self.linear_iterations = 0
+        # (u, r): the residual of the discrete equation of motion the last step solved, whose rows on
+        # the fixed dofs are the reaction forces at the state u (runtime.reactions); None: not known
+        self.residual = None
 
     def solve(self, data, b, x_c=None, x0=None):
         """Eliminate the fixed dofs (values x_c) and solve; counts linear iterations."""
@@ -193,6 +196,7 @@ def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndar
             raise TensormassError(f"{where}: the residual or the load is not finite (|residual| = {res:.3g}, "
                                   f"|load| = {scale:.3g}): loads or displacements beyond floating-point range")
         if not moving and res <= s.newton_tolerance * scale:
+            ctx.residual = (u, g)              # reactions at u (runtime.reactions), no extra assembly
             return u, it - 1
         try:
             d = ctx.solve(potential.hessian(u, project), -g, du_c)
@@ -223,6 +227,7 @@ def newton(ctx: Context, potential: _Potential, u: np.ndarray, target_c: np.ndar
         u = u_new
         g = potential.gradient(u) if g_new is None else g_new
         if tiny and not np.any(target_c - u[fixed]):
+            ctx.residual = (u, g)
             return u, it
     res = safe_norm(g[free])
     raise TensormassError(f"{where}: Newton did not converge in {s.newton_max_iterations} iterations "
@@ -376,7 +381,10 @@ class ImplicitEuler(_Dynamic):
         self._last_dv = dv if h == self.dt else None
         ctx.newton_iterations += 1
         v1 = v + dv
-        return u + h * v1, v1
+        u1 = u + h * v1
+        # the step's equation, A dv / h - (f - h K v) = 0, on every dof: its fixed rows are the reactions
+        ctx.residual = (u1, ctx.asm.matrix(A) @ dv / h - (f - h * Kv))
+        return u1, v1
 
 
 class BackwardEuler(_Dynamic):
@@ -426,7 +434,10 @@ class Explicit(_Dynamic):
         v1 = v.copy()
         v1[free] += h * self.inv_mass[free] * f[free]
         v1[fixed] = self.boundary_velocity(u, t, h)
-        return u + h * v1, v1
+        u1 = u + h * v1
+        # M (v1 - v) / h - f(u, v): zero on the free dofs, the reactions over the step on the fixed ones
+        ctx.residual = (u1, self.mass * (v1 - v) / h - f)
+        return u1, v1
 
     def step(self, k: int) -> dict:
         # no dt halving here: an explicit blow-up is a too-large dt, reported clearly
@@ -677,6 +688,7 @@ class GeneralizedAlpha(_Dynamic):
         y, _ = newton(ctx, potential, y, target_y, f"{self.kind}: time {t + h:.6g}")
         u1 = (y - af * u) / (1.0 - af)
         u1[fixed] = target_u
+        ctx.residual = (u1, ctx.residual[1])      # the equation solved at t_{n+1-alpha_f} (reactions)
         a1, v1 = kinematics(u1)
         # boundary velocity and acceleration: backward differences of the prescribed path
         v1[fixed] = (target_u - u[fixed]) / h

@@ -37,6 +37,8 @@ Schema (every table but [mesh] and [[material]] is optional)::
     displacement = [0.0, 0.0, -0.01]        # prescribed (a full vector), on
     components = [2]                        # these components only (default: all)
     amplitude = "press"                     # optional: an [[amplitude]] scales it over time (default: the ramp)
+    name = "clamp"                          # optional: the reaction's name (default "fixed[i]"; runtime.reactions)
+    moment_about = [0.0, 0.1, 0.1]          # optional: the reaction moment's point (default: the nodes' centroid)
     [[fixed]]                               # a rigid motion of the nodes in the box (runtime.motion):
     box = [[...], [...]]
     rotation = { axis = [1, 0, 0], point = [1, 0.1, 0.1], angle = 90.0 }   # degrees; 2D: no axis
@@ -136,6 +138,8 @@ class Fixed:
     rotation: Rotation | None = None      # rigid motion (runtime.motion): rotation about an axis ...
     translation: tuple | None = None      # ... and/or translation, applied as true rotations at every step
     region: str | int | None = None       # a mesh group (name or id): its nodes (with box: those inside)
+    name: str | None = None               # reaction name (runtime.reactions); None: "fixed[i]"
+    moment_about: tuple | None = None     # reaction moment point; None: the centroid of its nodes at rest
 
 
 @dataclass
@@ -325,7 +329,8 @@ _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "
         "amplitude")
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
-_FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region")
+_FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
+          "moment_about")
 _LOADS = ("gravity", "force", "traction", "pressure", "gravity_amplitude")
 _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
@@ -488,6 +493,11 @@ class _Parser:
         materials = [self.material(t, f"material[{i}]")
                      for i, t in enumerate(self.tables(data["material"], "material"))]
         fixed = [self.fixed(t, f"fixed[{i}]") for i, t in enumerate(self.tables(data.get("fixed", []), "fixed"))]
+        reaction_names = [f.name if f.name is not None else f"fixed[{i}]" for i, f in enumerate(fixed)]
+        dup = next((i for i, n in enumerate(reaction_names) if reaction_names.index(n) != i), None)
+        if dup is not None:
+            raise SceneError(f"fixed[{dup}].name: duplicate reaction name {reaction_names[dup]!r} "
+                             f"(fixed[{reaction_names.index(reaction_names[dup])}] has it too)")
         loads = self.loads(self.table(data.get("loads", {}), "loads"))
         amplitudes = self.amplitudes(data.get("amplitude", []), fixed, loads)
         solver = self.solver(self.table(data.get("solver", {}), "solver"))
@@ -648,7 +658,17 @@ class _Parser:
                 raise SceneError(f"{key}.components: repeated component in {list(comps)}")
         fixed = Fixed(box=box, displacement=disp, components=comps, region=region)
         self.motion(t, key, fixed, len(box[0]) if box is not None else (self.dim or 3))
+        self.reaction(t, key, fixed, bdim)
         return fixed
+
+    def reaction(self, t, key, fixed, dim) -> None:
+        """name and moment_about of a [[fixed]] entry (runtime.reactions)."""
+        if "name" in t:
+            fixed.name = self.string(t["name"], f"{key}.name")
+            if not fixed.name.strip():
+                raise SceneError(f"{key}.name: must not be empty")
+        if "moment_about" in t:
+            fixed.moment_about = self.vector(t["moment_about"], f"{key}.moment_about", dim=dim)
 
     def motion(self, t, key, fixed, dim) -> None:
         """amplitude, rotation and translation of a [[fixed]] entry (runtime.motion)."""

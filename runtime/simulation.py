@@ -22,8 +22,10 @@ from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, 
                      TensormassError)
 from . import fields as _fields
 from .health import HealthMonitor
+from .history import History, units as _units
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
+from . import reactions as _reactions
 from .refine import interpolate_nodal
 
 __all__ = ["Simulation", "Summary"]
@@ -33,9 +35,9 @@ __all__ = ["Simulation", "Summary"]
 # stride doubles, so a run of any length keeps between HISTORY_MAX/2 and HISTORY_MAX rows.
 HISTORY_MAX = 4096
 # Explicit steps are cheap (one forces call): their elastic energy, which a force kernel does not
-# give, is evaluated every this many steps (and at every frame and the last step), not every step.
+# give, is evaluated every this many steps, at every frame and the last step, and for every step the
+# history keeps (runtime.history: all of them until HISTORY_MAX rows, then every stride-th).
 EXPLICIT_ENERGY_EVERY = 10
-_HISTORY_KEYS = ("step", "time", "newton", "wall", "elastic", "kinetic", "external_work")
 # Exit code of each final status (runtime.errors: 0 trusted, 3 not trusted, 130 interrupted).
 _EXIT = {"ok": EXIT_OK, "warnings": EXIT_OK, "invalid": EXIT_UNTRUSTED, "diverged": EXIT_UNTRUSTED,
          "failed": EXIT_UNTRUSTED, "interrupted": EXIT_INTERRUPTED}
@@ -67,6 +69,7 @@ class Summary:
     estimate: dict | None = None          # runtime.resources: memory and time estimated before allocating
     probe_points: dict = field(default_factory=dict)   # how each probe reads the body (Model.probe_info)
     fields: dict | None = None            # output fields of the frames: names, units, law_ids (runtime.fields)
+    units: dict = field(default_factory=dict)      # unit of every per_step key (runtime.history.units)
 
     @property
     def exit_code(self) -> int:
@@ -84,33 +87,9 @@ class Summary:
         return self.to_dict().keys()
 
 
-class _History:
-    """Per-step values, bounded: rows of the steps that are multiples of `stride` (plus the running totals)."""
-
-    def __init__(self):
-        self.rows = {k: [] for k in _HISTORY_KEYS}
-        self.stride = 1
-        self.wall_total = 0.0
-        self.first_wall = None
-        self.last = {}
-
-    def add(self, row: dict) -> None:
-        self.wall_total += row["wall"]
-        if self.first_wall is None:
-            self.first_wall = row["wall"]
-        self.last = row
-        if row["step"] % self.stride:
-            return
-        for key in _HISTORY_KEYS:
-            self.rows[key].append(row[key])
-        if len(self.rows["step"]) > HISTORY_MAX:
-            self.stride *= 2
-            keep = [i for i, k in enumerate(self.rows["step"]) if k % self.stride == 0]
-            for key in _HISTORY_KEYS:
-                self.rows[key] = [self.rows[key][i] for i in keep]
-
-    def to_dict(self) -> dict:
-        return dict(self.rows, stride=self.stride)
+def _History() -> History:
+    """The run's per-step history (runtime.history), bounded by this module's HISTORY_MAX."""
+    return History(HISTORY_MAX)
 
 
 class Simulation:
@@ -306,6 +285,7 @@ class Simulation:
         self._write(0, self.monitor.start(self.ctx, energies).flag)
         for k in range(1, integ.n_steps + 1):
             t0 = time.perf_counter()
+            linear = self.ctx.linear_iterations
             info = integ.step(k)
             if self.adapter is not None:
                 self._adapt(k)
@@ -313,12 +293,19 @@ class Simulation:
                 self.monitor.model = model
             wall = time.perf_counter() - t0
             frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
-            energies = self._energies(k, frame)
+            keep = self._history.keeps(k)
+            energies = self._energies(k, frame or keep)
             check = self.monitor.check(self.ctx, k, energies)
             if check.stop:
                 raise _Stop(check.stop + self._hint(k))
             self._step = k
-            self._history.add({"step": k, "time": info["time"], "newton": info["newton"], "wall": wall, **energies})
+            row = {"step": k, "time": info["time"], "newton": info["newton"],
+                   "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
+            if keep:             # probes and reactions only for the rows the history keeps
+                row["probes"] = model.probe_values(self.ctx.u)
+                row["reactions"] = {name: {"force": r["force"].tolist(), "moment": np.ravel(r["moment"]).tolist()}
+                                    for name, r in self.reactions().items()}
+            self._history.add(row)
             if frame:
                 self._write(k, check.flag)
             if self.progress is not None:
@@ -372,7 +359,8 @@ class Simulation:
     def _energies(self, step: int, frame: bool = True) -> dict:
         """Elastic, kinetic and external work at the current state (not counted as assembly time).
 
-        Explicit runs evaluate the elastic energy only every EXPLICIT_ENERGY_EVERY steps and on frames.
+        Explicit runs evaluate the elastic energy only every EXPLICIT_ENERGY_EVERY steps, on frames and
+        on the steps the history keeps (frame=True).
         """
         ctx, model = self.ctx, self.model
         explicit = isinstance(self.integrator, Explicit)
@@ -399,6 +387,31 @@ class Simulation:
             total += model.pressure.work(last, u)
         self._pressure_path = (u.copy(), total)
         return total
+
+    # -- reactions (runtime.reactions) ------------------------------------------------------------
+    def reactions(self) -> dict:
+        """{name: {"force", "moment", "point"}} of every [[fixed]] entry at the current state.
+
+        force (dim,) [N], moment about point [N m]: (3,) in 3D, the z component (a float) in 2D;
+        the force the support exerts on the body (runtime.reactions has the definition).
+        """
+        if self.ctx is None:
+            raise TensormassError("reactions: the run has not started (no state yet)")
+        return self._reaction_groups().evaluate(self._reaction_residual(), self.ctx.u)
+
+    def _reaction_groups(self):
+        cached = getattr(self, "_reaction_cache", None)
+        if cached is None or cached.model is not self.model:          # refinement: a new model
+            cached = self._reaction_cache = _reactions.Reactions(self.model)
+        return cached
+
+    def _reaction_residual(self):
+        ctx, known = self.ctx, getattr(self, "_residual_cache", None)
+        if known is not None and known[0] is ctx.u and known[1] is ctx.v and known[2] == ctx.t:
+            return known[3]
+        r = _reactions.residual(ctx, self.integrator)
+        self._residual_cache = (ctx.u, ctx.v, ctx.t, r)
+        return r
 
     def _write(self, step: int, flag):
         if self.writer is None:
@@ -438,7 +451,8 @@ class Simulation:
             status=status, message=message, warnings=list(self.monitor.warnings),
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
-            fields=self._fields_summary())
+            fields=self._fields_summary(),
+            units=_units(model.dim, model.solver.kind == "static"))
 
     def _fields_summary(self):
         names = self._frame_fields()
