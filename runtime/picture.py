@@ -10,7 +10,8 @@ volume cells (runtime.mesh.boundary_faces: outward, quadratic faces with their m
 projected orthographically along a view direction (`view` = (elevation, azimuth) in degrees, as
 matplotlib's 3D axes name them; default (20, -60): from the front right, above), back faces
 culled (the boundary of a volume mesh is closed and outward, so a face turned away is hidden by
-another) and the rest painted back to front by mean depth. 2D meshes: the cells themselves,
+another; faces just past edge-on are kept, see _CULL) and the rest painted back to front by
+mean depth. 2D meshes: the cells themselves,
 x to the right, y up. Each face (2D: cell) is a polygon through its corners and midside nodes,
 so quadratic faces show their curved outline. Colours: a nodal field is interpolated linearly on
 a fan of triangles around each face's centre (the centre value is the mean over the face's
@@ -52,6 +53,10 @@ __all__ = ["write_picture", "render_picture", "pick_field", "pyvista_usable", "E
 
 EDGE_LIMIT = 6000                 # mesh edges drawn up to this many visible faces (2D: cells)
 DEFAULT_VIEW = (20.0, -60.0)      # elevation, azimuth in degrees
+# Faces culled when their normal points away from the viewer by more than this (cosine): a
+# little beyond edge-on, because a curved (quadratic) face whose mean normal points slightly
+# away can still show part of itself at the silhouette; these are painted first (farthest).
+_CULL = -0.25
 _BACKGROUND = "white"
 
 
@@ -395,7 +400,7 @@ def _render_matplotlib(scene) -> bytes:
         normals = np.array([_newell(x[outline]) for outline, _ in polys])
         length = np.linalg.norm(normals, axis=1)
         facing = normals @ toward
-        keep = np.flatnonzero(facing > 1e-12 * np.maximum(length, 1e-300))
+        keep = np.flatnonzero(facing > _CULL * np.maximum(length, 1e-300))
         mean_depth = np.array([depth[polys[i][0]].mean() for i in keep])
         keep = keep[np.argsort(mean_depth, kind="stable")]          # back to front
         if scene["shade"]:
