@@ -3,7 +3,7 @@
     write_picture("out/tip.png", mesh, mesh.points, u, von_mises, "von_mises", unit="Pa",
                   title="cantilever", step=10, time=0.1)
     write_picture("out/u.png", mesh, None, u, None, "displacement", unit="m")   # |u| (values=None)
-    write_picture(path, mesh, X, u, {**point_fields, **cell_fields}, "von_mises")  # picked by name
+    write_picture(path, mesh, X, u, sim.fields(["von_mises"]), "von_mises", scale="auto")  # by name
 
 What is drawn. The body at points + scale * displacement. 3D meshes: the boundary faces of the
 volume cells (runtime.mesh.boundary_faces: outward, quadratic faces with their midside nodes),
@@ -49,7 +49,7 @@ from .. import elements as _types
 from .errors import TensormassError
 from .output import OutputError, check_writable, write_bytes_atomic
 
-__all__ = ["write_picture", "render_picture", "pick_field", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
+__all__ = ["write_picture", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
 
 EDGE_LIMIT = 6000                 # mesh edges drawn up to this many visible faces (2D: cells)
 DEFAULT_VIEW = (20.0, -60.0)      # elevation, azimuth in degrees
@@ -71,7 +71,10 @@ def write_picture(path, mesh, points, displacement, values, field_name: str = "d
 
     points: reference positions (n, dim) (None: mesh.points). displacement: (n, dim) or the
     flat dof vector (None: zero). values: one value (or row) per point or per cell, a mapping
-    {name: array} from which field_name is taken, or None for |displacement|. size: (width,
+    {name: array} from which field_name is taken, a pair of mappings (point fields, cell fields)
+    as Simulation.fields() returns them (the nodal one is drawn when both have the name), or
+    None for |displacement|. scale: a number, or "auto" (auto_scale: the largest displacement
+    drawn at about a tenth of the body's size, never less than as it is). size: (width,
     height) in pixels. clim: (low, high) of the colour bar (default: the field's range).
     """
     target = _check_path(path)
@@ -107,6 +110,9 @@ def render_picture(mesh, points, displacement, values, field_name: str = "displa
 
 def pick_field(values, field_name: str, n_points: int, n_cells: int, displacement=None):
     """(array, "point" | "cell", label) of the field to draw; see write_picture for `values`."""
+    if isinstance(values, (tuple, list)) and len(values) == 2 and all(isinstance(v, Mapping) for v in values):
+        point, cell = values                           # Simulation.fields(): nodal values first
+        values = {**cell, **point}
     if values is None or (isinstance(values, Mapping) and field_name not in values):
         if field_name in ("displacement", "u") and displacement is not None:
             return np.linalg.norm(displacement, axis=1), "point", "|displacement|"
@@ -179,10 +185,12 @@ def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, 
         if u.shape != (n, dim):
             raise TensormassError(f"picture: displacement must have shape ({n}, {dim}), got {u.shape}")
         _finite("displacement", u)
+    if isinstance(scale, str) and scale == "auto":
+        scale = auto_scale(X, u)
     try:
         scale = float(scale)
     except (TypeError, ValueError):
-        raise TensormassError(f"picture: scale must be a number, got {scale!r}") from None
+        raise TensormassError(f"picture: scale must be a number or \"auto\", got {scale!r}") from None
     if not math.isfinite(scale):
         raise TensormassError(f"picture: scale must be finite, got {scale}")
     try:
@@ -217,6 +225,21 @@ def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, 
     return dict(mesh=mesh, dim=dim, x=X + scale * u, values=arr, where=where, label=label, unit=str(unit or ""),
                 scale=scale, width=width, height=height, cmap=colormap, clim=(lo, hi), view=(elev, azim),
                 polys=polys, cells=cells, moved=bool(np.any(u)))
+
+
+def auto_scale(points, displacement, target: float = 0.1) -> float:
+    """A displacement scale that makes the largest displacement about `target` of the body's
+    size (bounding-box diagonal), rounded down to 1, 2 or 5 times a power of ten; never below 1
+    (a visible deformation is drawn as it is)."""
+    X = np.asarray(points, dtype=np.float64)
+    u = np.asarray(displacement, dtype=np.float64).reshape(len(X), -1)
+    size = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) if len(X) else 0.0
+    umax = float(np.sqrt((u * u).sum(axis=1)).max()) if len(u) else 0.0
+    if not (umax > 0.0 and size > 0.0) or umax >= target * size:
+        return 1.0
+    raw = target * size / umax
+    power = 10.0 ** math.floor(math.log10(raw))
+    return float(max(m for m in (1.0, 2.0, 5.0) if m * power <= raw * (1 + 1e-12)) * power)
 
 
 def _view(view):

@@ -180,3 +180,26 @@ def test_pyvista_when_it_renders(tmp_path, monkeypatch):
     path = tmp_path / "pv.png"
     assert write_picture(path, mesh, None, _bent(mesh), mesh.points[:, 0], "x", unit="m", size=SIZE) == "pyvista"
     _check_picture(path, extremes=False)
+
+
+def test_fields_as_simulation_gives_them_and_auto_scale(tmp_path):
+    """values=(point_fields, cell_fields): the nodal field wins when both have the name."""
+    from tensormass.runtime.picture import auto_scale, pick_field
+    mesh = generate_bar(size=(1.0, 0.2, 0.2), cells=(2, 1, 1), element="hexahedron")
+    point = {"von_mises": mesh.points[:, 0].copy()}
+    cell = {"von_mises": np.array([7.0, 8.0]), "det_F_min": np.ones(2)}
+    arr, where, label = pick_field((point, cell), "von_mises", mesh.n_points, mesh.n_cells)
+    assert where == "point" and np.array_equal(arr, point["von_mises"]) and label == "von_mises"
+    arr, where, _ = pick_field((point, cell), "det_F_min", mesh.n_points, mesh.n_cells)
+    assert where == "cell" and list(arr) == [1.0, 1.0]
+    with pytest.raises(TensormassError, match="unknown field 'pressure'; available: det_F_min, von_mises"):
+        pick_field((point, cell), "pressure", mesh.n_points, mesh.n_cells)
+    # auto scale: largest displacement ~ a tenth of the diagonal (1.039 m), rounded down to 1-2-5
+    u = np.zeros_like(mesh.points)
+    u[:, 2] = -0.006 * mesh.points[:, 0]
+    assert auto_scale(mesh.points, u) == 10.0                 # 0.1039 / 0.006 = 17.3 -> 10
+    assert auto_scale(mesh.points, 100 * u) == 1.0            # 0.6 m: drawn as it is
+    assert auto_scale(mesh.points, 0 * u) == 1.0
+    png, _ = render_picture(mesh, None, u, (point, cell), "von_mises", scale="auto", size=SIZE,
+                            backend="matplotlib")
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
