@@ -49,7 +49,7 @@ from .. import elements as _types
 from .errors import TensormassError
 from .output import OutputError, check_writable, write_bytes_atomic
 
-__all__ = ["write_picture", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
+__all__ = ["write_picture", "picture_of_simulation", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
 
 EDGE_LIMIT = 6000                 # mesh edges drawn up to this many visible faces (2D: cells)
 DEFAULT_VIEW = (20.0, -60.0)      # elevation, azimuth in degrees
@@ -87,6 +87,33 @@ def write_picture(path, mesh, points, displacement, values, field_name: str = "d
     except OSError as exc:
         raise OutputError(f"cannot write the picture {target}: {exc.strerror or exc}") from None
     return used
+
+
+def picture_of_simulation(sim, path, field: str = "von_mises", scale="auto", title=None, step=None, time=None,
+                          **options) -> str:
+    """write_picture for a Simulation at its current state: its mesh (the current one after
+    refinement), its displacement, and the field from sim.fields([field]) with the unit that
+    runtime.fields.FIELDS gives it ("displacement" needs no fields). Returns the back end used."""
+    mesh = sim.model.mesh
+    u = sim.displacement
+    unit = options.pop("unit", None)
+    if field in ("displacement", "u"):
+        values, unit = None, "m" if unit is None else unit
+    else:
+        fields = getattr(sim, "fields", None)
+        if fields is None:
+            raise TensormassError("picture: this simulation computes no fields; only 'displacement' can be drawn")
+        values = fields([field])
+        if unit is None:
+            try:
+                from .fields import FIELDS
+                unit = FIELDS[field].unit if field in FIELDS else ""
+            except ImportError:
+                unit = ""
+    if title is None:
+        title = getattr(sim.model, "name", None)
+    return write_picture(path, mesh, mesh.points, u, values, field, unit=unit, scale=scale, title=title,
+                         step=step, time=time, **options)
 
 
 def render_picture(mesh, points, displacement, values, field_name: str = "displacement", unit: str = "",

@@ -203,3 +203,28 @@ def test_fields_as_simulation_gives_them_and_auto_scale(tmp_path):
     png, _ = render_picture(mesh, None, u, (point, cell), "von_mises", scale="auto", size=SIZE,
                             backend="matplotlib")
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_picture_of_a_simulation(tmp_path):
+    """picture_of_simulation reads the mesh, displacement and fields a Simulation offers."""
+    from types import SimpleNamespace
+
+    from tensormass.runtime.picture import picture_of_simulation
+    mesh = generate_bar(size=(1.0, 0.2, 0.2), cells=(3, 1, 1), element="hexahedron")
+    asked = []
+
+    def fields(names):
+        asked.append(list(names))
+        return {"von_mises": mesh.points[:, 0] * 1e5}, {"von_mises": np.ones(mesh.n_cells)}
+
+    sim = SimpleNamespace(model=SimpleNamespace(mesh=mesh, name="bar"), displacement=_bent(mesh, 0.01),
+                          fields=fields)
+    path = tmp_path / "vm.png"
+    assert picture_of_simulation(sim, path, "von_mises", size=SIZE, shade=False, backend="matplotlib") == "matplotlib"
+    assert asked == [["von_mises"]]
+    _check_picture(path)
+    older = SimpleNamespace(model=sim.model, displacement=sim.displacement)     # no fields(): |u| only
+    picture_of_simulation(older, path, "displacement", size=SIZE, backend="matplotlib")
+    with pytest.raises(TensormassError, match="computes no fields"):
+        picture_of_simulation(older, tmp_path / "no.png", "von_mises", backend="matplotlib")
+    assert not (tmp_path / "no.png").exists()
