@@ -7,6 +7,7 @@
     tensormass demo                               the embedded default scene (a mixed bar under gravity)
     tensormass bench kernels|compile|steps        kernel throughput against a classic loop; compile budget; steps
     tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
+    tensormass plot SUMMARY.json [-o PNG]         history curves of a run (probes, energies, reactions, solver)
 
 Every ending is an exit code and at most one line on stderr (README, "Exit codes"):
 0 done; 1 internal error (a bug: `tensormass: internal error: ...`, the traceback
@@ -41,6 +42,7 @@ from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, R
 from ..runtime.output import check_writable
 from .bench import add_bench_command
 from .commands import add_commands
+from .plot import add_plot_command
 from .reports import add_report_command
 
 
@@ -177,6 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_commands(sub)                      # run, demo
     add_bench_command(sub)                 # bench kernels, bench compile, bench steps
     add_report_command(sub)                # report accuracy, report stability
+    add_plot_command(sub)                  # plot SUMMARY.json: history curves
     return parser
 
 
