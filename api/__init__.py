@@ -12,7 +12,11 @@ from .generator import GENERATOR_VERSION as __version__
 
 _ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "DegenerateElementError",
            "KernelNotFoundError", "RunStopped", "RunInterrupted")
-__all__ = ["__version__", "load_kernel", "Kernel", "Scene", "Simulation", *_ERRORS]
+# name -> the runtime module that defines it (imported on first use)
+_LAZY = {"load_kernel": "kernels", "Kernel": "kernels", "Scene": "scene", "Simulation": "simulation",
+         "Summary": "simulation", "FIELDS": "fields", "write_picture": "picture", "plot_history": "curves",
+         **{name: "errors" for name in _ERRORS}}
+__all__ = ["__version__", *_LAZY]
 
 
 def __dir__():
@@ -21,16 +25,7 @@ def __dir__():
 
 
 def __getattr__(name):
-    if name in _ERRORS:
-        from .runtime import errors
-        return getattr(errors, name)
-    if name in ("load_kernel", "Kernel"):
-        from .runtime import kernels
-        return getattr(kernels, name)
-    if name == "Scene":
-        from .runtime.scene import Scene
-        return Scene
-    if name == "Simulation":
-        from .runtime.simulation import Simulation
-        return Simulation
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f".runtime.{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'tensormass' has no attribute {name!r}")

@@ -22,7 +22,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..runtime.errors import RunInterrupted, RunStopped, TensormassError
-from ..runtime.scene import Scene
+from ..runtime.scene import Scene, picture_field
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
            "DEMO_OUT"]
@@ -142,7 +142,7 @@ def _simulate(Simulation, scene, files, progress):
     finally:
         if progress is not None:
             progress.finish()
-    return files.finish(summary, stopped), stopped
+    return files.finish(summary, stopped, sim=sim), stopped
 
 
 def _steps_done(sim) -> int:
@@ -294,7 +294,12 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
         rows.append(("output", "none (set [output] dir or --out)"))
     written = [str(p) for p in ((o or {}).get("summary"), json_path) if p is not None]
     if written:
-        rows.append(("summary", ", ".join(dict.fromkeys(written))))
+        rows.append(("summary", ", ".join(dict.fromkeys(written)) + " (history: the same name with .csv)"))
+    for key in ("picture", "plot"):
+        if (o or {}).get(key):
+            rows.append((key, str(o[key])))
+    if (o or {}).get("picture_skipped"):
+        rows.append(("picture", f"not drawn: {o['picture_skipped']}"))
     width = max(len(r[0]) for r in rows)
     for key, value in rows:
         print(f"{key:<{width}}  {value}", file=out)
@@ -308,6 +313,10 @@ def cmd_run(args) -> int:
     if getattr(args, "threads", None) is not None:       # --threads overrides [solver] threads
         from ..runtime.parallel import parse_threads
         scene.solver.threads = parse_threads(args.threads, "--threads")
+    if getattr(args, "picture", None) is not None:      # --picture [FIELD] / --plot override [output]
+        scene.output.picture = picture_field(True if args.picture == "" else args.picture, "--picture")
+    if getattr(args, "plot", False):
+        scene.output.plot = True
     data = run_scene(scene, out=args.out, json_path=args.json, quiet=args.quiet,
                      overwrite=getattr(args, "overwrite", False))
     return data["exit_code"]
@@ -378,6 +387,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE_HELP)
     p.add_argument("--max-memory", metavar="SIZE", help=_MAX_MEMORY_HELP)
+    p.add_argument("--picture", nargs="?", const="", metavar="FIELD",
+                   help="at the end, a PNG of the deformed body coloured by FIELD (default von_mises) in the output folder")
+    p.add_argument("--plot", action="store_true", help="the per-step history curves as summary.png in the output folder")
     p.add_argument("--threads", metavar="N", help="assembly threads (overrides [solver] threads and "
                    "$TENSORMASS_THREADS; default: every core); results do not depend on it")
     p.set_defaults(run=cmd_run)

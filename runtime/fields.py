@@ -65,7 +65,7 @@ FIELDS = {f.name: f for f in (
           "listed in the summary's fields.law_ids)", "1", "scalar", ("cell",), records=False),
     Field("region", "the cell's mesh tag (gmsh physical id), else the id of the mesh volume group that "
           "holds it; -1 where the mesh has neither", "1", "scalar", ("cell",), records=False),
-    # HOOK(react): the nodal reaction force is runtime.reactions' (engineer react); it reaches
+    # The nodal reaction force is runtime.reactions'; it reaches
     # evaluate() through `providers` (Simulation.fields passes it), never computed here.
     Field("reaction", "reaction force at constrained nodes (runtime.reactions)", "N", "vector", ("point",),
           records=False),
@@ -80,7 +80,7 @@ DEFAULT_FIELDS = ("von_mises", "cauchy_stress", "det_F_min")
 # ~10 arrays of CHUNK x points x 9 doubles, 20 MB for hexahedra with 27 points).
 CHUNK = 1024
 
-# Fields another module computes (HOOK(react)): name -> what provides it.
+# Fields another module computes: name -> what provides it.
 PROVIDED = {"reaction": "runtime.reactions"}
 
 

@@ -7,12 +7,18 @@
 
 The output folder ([output] dir, or `out`: --out / Simulation(output=...)) receives the VTU
 frames and their .pvd (runtime.output.Writer) and, beside them, ``summary.json``: the run summary
-(also for a run that stopped, with its status and message). ``json_path`` (--json) writes one more
-copy elsewhere. A run that ends before its first frame leaves no folder behind.
+(also for a run that stopped, with its status and message) and ``summary.csv``: its per-step
+history (runtime.history). ``json_path`` (--json F) writes one more copy elsewhere, with its
+history beside it (F with .csv). On request ([output] picture / plot, run --picture / --plot):
+``<field>.png``, the deformed body coloured by a field at the end of the run (runtime.picture;
+not drawn for a run that stopped: its last state is not a result), and ``summary.png``, the
+history curves (runtime.curves; the same picture as `tensormass plot summary.json`).
+A run that ends before its first frame leaves no folder behind.
 
 Everything that can be refused is refused in prepare(), before the model is built: an unwritable
-folder, frames or a .pvd that an earlier run of ours did not write (unless overwrite), a summary
-path that holds anything but one of our summaries.
+folder, frames or a .pvd that an earlier run of ours did not write, a summary path that holds
+anything but one of our summaries, a history/picture file in a folder whose summary.json is not
+ours (all unless overwrite), a picture or plot asked without an output folder.
 """
 from __future__ import annotations
 
@@ -20,7 +26,9 @@ import os
 from pathlib import Path
 
 from .errors import EXIT_OK, TensormassError
-from .output import SUMMARY_FORMAT, Writer, check_summary_path, write_summary
+from .curves import plot_history
+from .history import write_history_csv
+from .output import SUMMARY_FORMAT, Writer, check_summary_path, is_summary_file, write_summary
 
 __all__ = ["RunFiles", "SUMMARY_NAME"]
 
@@ -46,8 +54,11 @@ class RunFiles:
         self.mesh = scene.load_mesh()
         self.writer = Writer(self.out_dir, self.mesh, overwrite=overwrite) if self.out_dir is not None else None
         self.summary_path = None if self.out_dir is None else self.out_dir / SUMMARY_NAME
+        self.picture = scene.output.picture              # a field name, or None
+        self.plot = scene.output.plot
         self.data = None
         self._prepared = False
+        self._late_error = None
 
     def prepare(self) -> None:
         """Every check before the run (idempotent); writes nothing."""
@@ -55,11 +66,33 @@ class RunFiles:
             return
         scene = self.scene
         self.json_path = check_summary_path(self.json_path, scene_file=scene.source, writer=self.writer)
+        if (self.picture or self.plot) and self.out_dir is None:
+            what = "output.picture" if self.picture else "output.plot"
+            raise TensormassError(f"{what}: pictures go to the output folder; set [output] dir (or --out)")
         if self.writer is not None:
             self.writer.prepare()
             if self.out_dir.is_dir():        # else it is created with the first frame: nothing there yet
                 self._check_folder_summary()
+                self._check_folder_extras()
         self._prepared = True
+
+    def _extras(self) -> list:
+        """The files beside the folder's summary: its history, and the pictures asked for."""
+        out = [self.summary_path.with_suffix(".csv")]
+        if self.picture:
+            out.append(self.out_dir / f"{self.picture}.png")
+        if self.plot:
+            out.append(self.summary_path.with_suffix(".png"))
+        return out
+
+    def _check_folder_extras(self) -> None:
+        """History and pictures replace earlier ones of ours (the folder's summary.json is ours)."""
+        ours = is_summary_file(self.summary_path)
+        for path in self._extras():
+            if os.path.lexists(path) and not (self.overwrite or (ours and path.is_file() and not path.is_symlink())):
+                raise TensormassError(f"output file {path}: exists and was not written by an earlier tensormass "
+                                      "run in this folder (no summary.json of ours beside it); refusing to replace "
+                                      "it (--overwrite / overwrite=True replaces it)")
 
     def _check_folder_summary(self) -> None:
         """summary.json in the folder: replaced when it is one of ours, or with overwrite (like frames)."""
@@ -78,8 +111,9 @@ class RunFiles:
             self.writer.close()
             self.writer.discard()
 
-    def finish(self, summary, stopped=None) -> dict:
-        """Close the frames, write the summary (JSON) where asked; the summary dict.
+    def finish(self, summary, stopped=None, sim=None) -> dict:
+        """Close the frames, write the summary (JSON, and its history as CSV) where asked, and the
+        pictures asked for (from sim, the Simulation, at its final state); the summary dict.
 
         stopped: the RunStopped / RunInterrupted that ended the run, None for a result we stand
         behind. Raises the writer's OutputError when a frame could not be written (disk full).
@@ -94,11 +128,40 @@ class RunFiles:
                     writer.mark_stopped(_steps_done(summary), f"run {stopped.status}: {stopped}")
                 writer.discard()
         self.data = data = self.summary_data(summary, stopped)
+        if data["output"] is not None and writer.frames:
+            data["output"].update(self._pictures(data, stopped, sim))
         for path in self._summary_paths():
             write_summary(path, data)
+            if data.get("per_step"):
+                write_history_csv(path.with_suffix(".csv"), data["per_step"], data.get("units") or {})
+        if data["output"] is not None and data["output"].get("plot"):
+            plot_history(data, data["output"]["plot"])
         if self.json_path is not None:
             data["output_json"] = str(self.json_path)
+        if self._late_error is not None:
+            raise self._late_error
         return data
+
+    def _pictures(self, data, stopped, sim) -> dict:
+        """The picture and plot entries of data["output"] (paths; the picture drawn here)."""
+        out = {"plot": str(self.summary_path.with_suffix(".png")) if self.plot and data.get("per_step") else None,
+               "picture": None}
+        if not self.picture:
+            return out
+        if stopped is not None or sim is None:
+            out["picture_skipped"] = ("the run stopped: its last state is not a result to picture" if stopped
+                                      else "no simulation state to draw")
+            return out
+        from .picture import picture_of_simulation
+        path = self.out_dir / f"{self.picture}.png"
+        try:
+            picture_of_simulation(sim, path, self.picture, step=sim.step, time=sim.time)
+        except TensormassError as exc:           # the summary is still written; the error raised after it
+            out["picture_error"] = str(exc)
+            self._late_error = exc
+            return out
+        out["picture"] = str(path)
+        return out
 
     def _summary_paths(self) -> list:
         """The folder's summary (when the folder holds frames of this run) and --json's, once each."""

@@ -68,6 +68,8 @@ Schema (every table but [mesh] and [[material]] is optional)::
     dir = "out"                             # relative to the scene file (tensormass run --out: to the working dir)
     every = 10
     fields = ["von_mises", "cauchy_stress", "det_F_min"]   # the default; [] for none (runtime.fields.FIELDS)
+    picture = "von_mises"                   # or true / any field / "displacement": <dir>/<field>.png at the end
+    plot = true                             # the per-step history as <dir>/summary.png (runtime.curves)
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.
@@ -202,6 +204,8 @@ class Output:
     dir: str | None = None                # None: no files written
     every: int = 1
     fields: tuple | None = None           # names from runtime.fields.FIELDS; None: its DEFAULT_FIELDS
+    picture: str | None = None            # a PNG of the deformed body coloured by this field at the end
+    plot: bool = False                    # the per-step history as a PNG beside the summary
 
 
 @dataclass
@@ -338,7 +342,7 @@ _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass", "rho_inf", "threads")
 _PROBE = ("name", "point", "region", "box")
-_OUTPUT = ("dir", "every", "fields")
+_OUTPUT = ("dir", "every", "fields", "picture", "plot")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
@@ -853,7 +857,26 @@ class _Parser:
                 raise SceneError(f"output.fields: expected an array of field names, got {_type_name(t['fields'])} "
                                  f"(known fields: {', '.join(FIELDS)})")
             out.fields = check_field_names(t["fields"], "output.fields", SceneError)
+        if "picture" in t:                # true: von Mises; a field name; false: none (runtime.picture)
+            out.picture = picture_field(t["picture"], "output.picture")
+        if "plot" in t:
+            out.plot = self.boolean(t["plot"], "output.plot")
         return out
+
+
+PICTURE_DEFAULT = "von_mises"
+
+
+def picture_field(value, key: str) -> str | None:
+    """[output] picture / run --picture: true -> von Mises, false -> None, else a field to colour by."""
+    if value is True:
+        return PICTURE_DEFAULT
+    if value is False:
+        return None
+    known = ("displacement",) + tuple(FIELDS)
+    if not isinstance(value, str) or value not in known:
+        raise SceneError(f"{key}: expected true, false or a field name, got {value!r} (fields: {', '.join(known)})")
+    return value
 
 
 def _check_bar_extent(size, origin) -> None:

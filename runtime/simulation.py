@@ -189,10 +189,7 @@ class Simulation:
 
     def _field_providers(self) -> dict:
         """Fields other modules compute: name -> callable() giving the nodal array at the current state."""
-        providers = {}
-        # HOOK(react): providers["reaction"] = <callable: nodal reaction forces (n_points, dim) of
-        # runtime.reactions at the current state>; runtime.fields lists `reaction` and calls it.
-        return providers
+        return {"reaction": lambda: _reactions.reaction_field(self)}      # runtime.reactions
 
     def _frame_fields(self) -> tuple:
         """The scene's fields for a frame: names, or () when there are none or the writer takes no
@@ -239,7 +236,7 @@ class Simulation:
         except BaseException:
             self.files.abandon()
             raise
-        self.data = self.files.finish(summary)
+        self.data = self.files.finish(summary, sim=self)
         return summary
 
     def _run(self) -> Summary:

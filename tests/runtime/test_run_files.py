@@ -55,9 +55,10 @@ def test_python_run_writes_the_same_files_as_the_command_line(scene_path, tmp_pa
     assert main(["run", str(scene_path), "--out", str(tmp_path / "cli"), "--quiet"]) == 0
     summary = tm.Simulation(tm.Scene.from_toml(scene_path), output=tmp_path / "api").run()
     cli, api = tmp_path / "cli", tmp_path / "api"
-    assert _files(cli) == _files(api) == ["frame.pvd"] + [f"frame_{k:06d}.vtu" for k in range(4)] + ["summary.json"]
+    assert _files(cli) == _files(api) == (["frame.pvd"] + [f"frame_{k:06d}.vtu" for k in range(4)]
+                                          + ["summary.csv", "summary.json"])
     for name in _files(cli):
-        if name != "summary.json":              # timings differ; everything computed is bit-identical
+        if not name.startswith("summary"):      # timings differ; everything computed is bit-identical
             assert (cli / name).read_bytes() == (api / name).read_bytes(), name
     a, b = (json.loads((d / "summary.json").read_text()) for d in (cli, api))
     assert a["format"] == b["format"] == SUMMARY_FORMAT and set(a) == set(b)
@@ -139,3 +140,45 @@ def test_public_names_and_version(capsys):
         main(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.strip() == f"tensormass {tm.__version__}"
+
+
+def test_picture_plot_and_history_csv_on_request(scene_path, tmp_path):
+    scene_path.write_text(SCENE + "picture = true\nplot = true\nfields = [\"von_mises\", \"reaction\"]\n")
+    sim = tm.Simulation(tm.Scene.from_toml(scene_path))
+    summary = sim.run()
+    folder = tmp_path / "frames"
+    assert {"von_mises.png", "summary.png", "summary.csv", "summary.json"} <= set(_files(folder))
+    for png in ("von_mises.png", "summary.png"):
+        assert (folder / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = (folder / "summary.csv").read_text().splitlines()
+    assert rows[0].startswith("step,time [s],") and "reaction.fixed[0].Fz [N]" in rows[0]
+    assert len(rows) == 1 + len(summary.per_step["step"]) == 4
+    assert sim.data["output"]["picture"] == str(folder / "von_mises.png")
+    assert sim.data["output"]["plot"] == str(folder / "summary.png")
+
+
+def test_picture_needs_an_output_folder_and_a_known_field(scene_path):
+    scene_path.write_text(SCENE.replace('dir = "frames"', 'picture = "von_mises"'))
+    with pytest.raises(tm.TensormassError, match="output.picture: pictures go to the output folder"):
+        tm.Simulation(tm.Scene.from_toml(scene_path), json=scene_path.parent / "s.json")
+    scene_path.write_text(SCENE + 'picture = "vonmises"\n')
+    with pytest.raises(tm.TensormassError, match="output.picture: expected true, false or a field name"):
+        tm.Scene.from_toml(scene_path)
+
+
+def test_a_history_csv_that_is_not_ours_needs_overwrite(scene_path, tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    (folder / "summary.csv").write_text("my data\n")
+    with pytest.raises(tm.TensormassError, match="summary.csv: exists and was not written by an earlier tensormass"):
+        tm.Simulation(tm.Scene.from_toml(scene_path))
+    assert (folder / "summary.csv").read_text() == "my data\n"
+    tm.Simulation(tm.Scene.from_toml(scene_path), overwrite=True).run()
+    tm.Simulation(tm.Scene.from_toml(scene_path)).run()      # ours now: replaced without asking
+    assert (folder / "summary.csv").read_text().startswith("step,")
+
+
+def test_cli_picture_of_the_displacement(scene_path, tmp_path, capsys):
+    assert main(["run", str(scene_path), "--picture", "displacement", "--quiet"]) == 0
+    assert (tmp_path / "frames" / "displacement.png").read_bytes()[:4] == b"\x89PNG"
+    assert not (tmp_path / "frames" / "summary.png").exists()
