@@ -220,14 +220,14 @@ def _draw(summary, x, xlabel, panels, size) -> bytes:
     from matplotlib.figure import Figure
 
     width = int(size[0])
-    height = int(size[1]) if size[1] is not None else 90 + 250 * len(panels)
+    height = int(size[1]) if size[1] is not None else 115 + 250 * len(panels)
     if not (200 <= width <= 8000 and 200 <= height <= 20000):
         raise TensormassError(f"plot: size {width} x {height} pixels is out of range")
     fig = Figure(figsize=(width / 100.0, height / 100.0), dpi=100, facecolor="white")
     FigureCanvasAgg(fig)
     # fixed margins (pixels): a layout engine costs seconds for five panels; room on the right
     # for the legends, at the bottom for the x label, at the top for the title
-    fig.subplots_adjust(left=85 / width, right=1 - 190 / width, top=1 - 50 / height, bottom=55 / height,
+    fig.subplots_adjust(left=110 / width, right=1 - 190 / width, top=1 - 75 / height, bottom=55 / height,
                         hspace=0.3)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     marker = "o" if len(x) <= MARKER_LIMIT else None
@@ -238,6 +238,7 @@ def _draw(summary, x, xlabel, panels, size) -> bytes:
             ax.plot(x[ok], y[ok], marker=marker, markersize=3.5, linewidth=1.3, label=label)
         ax.set_title(panel["title"], fontsize=10, loc="left")
         ax.set_ylabel(panel["ylabel"])
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useMathText=True)   # short tick labels
         ax.grid(True, linewidth=0.4, alpha=0.5)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
         if panel["group"] == "solver":
