@@ -87,7 +87,7 @@ def test_plot_writes_one_png_with_a_panel_per_group(tmp_path):
     w, h = _check_png(path)
     assert h == 115 + 5 * 250
     assert plot_history(full_summary(), path, what=["energy"]) == ["energies"]
-    assert _check_png(path)[1] == 90 + 250
+    assert _check_png(path)[1] == 115 + 250
     assert sorted(os.listdir(tmp_path)) == ["h.png"]
 
 
