@@ -279,6 +279,12 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((f"probe {name}", f"u = {_fmt_vec(u)} m, |u| = {norm:.4g} m"))
         except (TypeError, ValueError):
             rows.append((f"probe {name}", str(u)))
+    for name, r in (data.get("reactions") or {}).items():
+        try:
+            rows.append((f"reaction {name}", f"F = {_fmt_vec(r['force'])} N, M = {_fmt_vec(r['moment'])} N m "
+                                             f"about {_fmt_vec(r['point'])}"))
+        except (KeyError, TypeError):
+            rows.append((f"reaction {name}", str(r)))
     est = data.get("estimate")
     if isinstance(est, dict) and est.get("text"):
         rows.append(("estimate", f"{est['text']} (before the run)"))

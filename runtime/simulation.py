@@ -68,6 +68,7 @@ class Summary:
     steps_done: int = 0                   # steps finished (== steps unless the run stopped)
     estimate: dict | None = None          # runtime.resources: memory and time estimated before allocating
     probe_points: dict = field(default_factory=dict)   # how each probe reads the body (Model.probe_info)
+    reactions: dict = field(default_factory=dict)      # final reaction force/moment/point per [[fixed]] entry
     fields: dict | None = None            # output fields of the frames: names, units, law_ids (runtime.fields)
     units: dict = field(default_factory=dict)      # unit of every per_step key (runtime.history.units)
 
@@ -448,8 +449,17 @@ class Simulation:
             status=status, message=message, warnings=list(self.monitor.warnings),
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
-            fields=self._fields_summary(),
+            fields=self._fields_summary(), reactions=self._final_reactions(),
             units=_units(model.dim, model.solver.kind == "static"))
+
+    def _final_reactions(self) -> dict:
+        """{name: {"force", "moment", "point"}} at the last state (lists), {} before any step."""
+        if self.ctx is None or not self._step:
+            return {}
+        try:
+            return {name: {k: np.ravel(v).tolist() for k, v in r.items()} for name, r in self.reactions().items()}
+        except (ValueError, ArithmeticError):        # a state that failed: the history has the last good ones
+            return {}
 
     def _fields_summary(self):
         names = self._frame_fields()

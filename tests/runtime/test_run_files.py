@@ -155,6 +155,9 @@ def test_picture_plot_and_history_csv_on_request(scene_path, tmp_path):
     assert len(rows) == 1 + len(summary.per_step["step"]) == 4
     assert sim.data["output"]["picture"] == str(folder / "von_mises.png")
     assert sim.data["output"]["plot"] == str(folder / "summary.png")
+    final = summary.reactions["fixed[0]"]                 # the summary's final reactions: the last row's
+    assert final["force"] == summary.per_step["reactions"]["fixed[0]"]["force"][-1]
+    assert final["moment"] == summary.per_step["reactions"]["fixed[0]"]["moment"][-1] and len(final["point"]) == 3
 
 
 def test_picture_needs_an_output_folder_and_a_known_field(scene_path):
