@@ -66,6 +66,8 @@ class RunFiles:
             return
         scene = self.scene
         self.json_path = check_summary_path(self.json_path, scene_file=scene.source, writer=self.writer)
+        if self.json_path is not None:
+            self._check_beside(self.json_path, [self.json_path.with_suffix(".csv")])
         if (self.picture or self.plot) and self.out_dir is None:
             what = "output.picture" if self.picture else "output.plot"
             raise TensormassError(f"{what}: pictures go to the output folder; set [output] dir (or --out)")
@@ -86,12 +88,17 @@ class RunFiles:
         return out
 
     def _check_folder_extras(self) -> None:
-        """History and pictures replace earlier ones of ours (the folder's summary.json is ours)."""
-        ours = is_summary_file(self.summary_path)
-        for path in self._extras():
+        self._check_beside(self.summary_path, self._extras())
+
+    def _check_beside(self, summary, paths) -> None:
+        """History and pictures beside a summary replace earlier ones of ours (that summary is ours)."""
+        ours = is_summary_file(summary)
+        for path in paths:
+            if _same_path(path, self.scene.source or ""):
+                raise TensormassError(f"output file {path}: is the scene file; give the summary another name")
             if os.path.lexists(path) and not (self.overwrite or (ours and path.is_file() and not path.is_symlink())):
                 raise TensormassError(f"output file {path}: exists and was not written by an earlier tensormass "
-                                      "run in this folder (no summary.json of ours beside it); refusing to replace "
+                                      f"run (no summary of ours beside it, {summary.name}); refusing to replace "
                                       "it (--overwrite / overwrite=True replaces it)")
 
     def _check_folder_summary(self) -> None:

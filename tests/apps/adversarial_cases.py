@@ -1349,13 +1349,13 @@ def _cache_cases() -> None:
     for how, what in (("garbage", "library overwritten with garbage"), ("truncate", "library truncated"),
                       ("remove", "library removed")):
         _cache_case(f"C, {what}", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so", how),),
-                    may_change=("cache/**", "out/**", "summary.json"))
+                    may_change=("cache/**", "out/**", "summary.json", "summary.csv"))
     _cache_case("C, hash sidecar removed", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so.sha256", "remove"),),
-                may_change=("cache/**", "out/**", "summary.json"))
+                may_change=("cache/**", "out/**", "summary.json", "summary.csv"))
     _cache_case("C, hash sidecar garbage", "ok", before=compiled, damage=copied + (("corrupt", "cache/*/c/*.so.sha256", "text"),),
-                may_change=("cache/**", "out/**", "summary.json"))
+                may_change=("cache/**", "out/**", "summary.json", "summary.csv"))
     _cache_case("C, compiled library in a read-only cache", "ok", before=compiled, damage=copied, hooks=ro,
-                may_change=("out/**", "summary.json"))
+                may_change=("out/**", "summary.json", "summary.csv"))
     _cache_case("C, stale temporary file of a crashed compile", "ok", files=(("cache/x/c/.lib.so.tmp", b"\x7fELF"),))
     _cache_case("C, no compiler", err, r"no C compiler", env=(("CC", "/nonexistent/cc"),))
     # the compiler's own output follows the one-line message: what the user needs to fix it
@@ -1395,7 +1395,7 @@ def _output_cases() -> None:
         files=(("notes.txt", "my notes\n"), ("link.json", {"symlink": "notes.txt"})))
     add("output", "--json onto a fifo", err, r"not a regular file", argv=ours + ("--json", "pipe"),
         files=(("pipe", {"fifo": True}),))
-    add("output", "--json onto an earlier summary", "ok", before=_DONE, may_change=("summary.json", "out/**"))
+    add("output", "--json onto an earlier summary", "ok", before=_DONE, may_change=("summary.json", "summary.csv", "out/**"))
     add("output", "--out onto a file", err, r"out.*not a folder", files=(("out", "a file\n"),))
     add("output", "--out onto /dev/null", err, r"/dev/null", argv=("run", "scene.toml", "--out", "/dev/null", "--quiet"))
     add("output", "--out into a read-only folder", err, r"locked.*Permission denied",

@@ -283,7 +283,7 @@ def test_rerun_removes_the_stale_frames_of_a_longer_run(tmp_path, capsys):
     assert run(capsys, "run", scene_file(tmp_path, steps=1), "--out", out, "--quiet")[0] == 0
     assert pvd_files(out / "frame.pvd") == ["frame_000000.vtu", "frame_000001.vtu"]
     assert sorted(p.name for p in out.iterdir()) == ["frame.pvd", "frame_000000.vtu", "frame_000001.vtu", "mine.txt",
-                                                     "summary.json"]
+                                                     "summary.csv", "summary.json"]
 
 
 @pytest.mark.parametrize("foreign", ["pvd without our marker", "unlisted frame"])
@@ -303,7 +303,8 @@ def test_files_with_our_names_that_are_not_ours_need_overwrite(tmp_path, capsys,
     assert (out / name).read_text() == "someone else's"
     assert run(capsys, "run", scene, "--out", out, "--quiet", "--overwrite")[0] == 0
     assert pvd_files(out / "frame.pvd") == ["frame_000000.vtu", "frame_000001.vtu"]
-    assert sorted(p.name for p in out.iterdir()) == ["frame.pvd", "frame_000000.vtu", "frame_000001.vtu", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["frame.pvd", "frame_000000.vtu", "frame_000001.vtu", "summary.csv",
+                                                     "summary.json"]
 
 
 def test_writer_prepare_refuses_without_overwrite(tmp_path):

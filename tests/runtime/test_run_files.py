@@ -176,6 +176,10 @@ def test_a_history_csv_that_is_not_ours_needs_overwrite(scene_path, tmp_path):
     with pytest.raises(tm.TensormassError, match="summary.csv: exists and was not written by an earlier tensormass"):
         tm.Simulation(tm.Scene.from_toml(scene_path))
     assert (folder / "summary.csv").read_text() == "my data\n"
+    (tmp_path / "results.csv").write_text("my results\n")        # --json results.json: its history beside it
+    with pytest.raises(tm.TensormassError, match="results.csv: exists and was not written"):
+        tm.Simulation(tm.Scene.from_toml(scene_path), json=tmp_path / "results.json")
+    assert (tmp_path / "results.csv").read_text() == "my results\n"
     tm.Simulation(tm.Scene.from_toml(scene_path), overwrite=True).run()
     tm.Simulation(tm.Scene.from_toml(scene_path)).run()      # ours now: replaced without asking
     assert (folder / "summary.csv").read_text().startswith("step,")
