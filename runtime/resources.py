@@ -118,9 +118,12 @@ def _dofs_per_node(cell_type: str, dim: int) -> int:
 
 
 # Simulation keeps at most simulation.HISTORY_MAX rows (a test checks they agree); a row
-# is 7 Python numbers (32 B each), once in the history and once in the summary dict.
+# is 8 Python numbers (32 B each) plus 3 per probe and 6 per [[fixed]] entry (reaction force and
+# moment, runtime.history), once in the history and once in the summary dict.
 HISTORY_ROWS = 4096
-HISTORY_ROW_BYTES = 7 * 32 * 2
+HISTORY_ROW_BYTES = 8 * 32 * 2
+HISTORY_BYTES_PER_PROBE = 3 * 32 * 2
+HISTORY_BYTES_PER_FIXED = 6 * 32 * 2
 # Uniform [[adapt]] refinement (every cell marked, the worst case) per round: cells x 2.0,
 # nodes x 1.6-2.3 measured on tetra and triangle bars.
 REFINE_CELLS, REFINE_NODES = 2.0, 2.5
@@ -426,6 +429,7 @@ def estimate(scene_or_counts, *, materials=None, solver=None, adapt=None, refine
     is read), or MeshCounts.  refinement: count the cell growth of [[adapt]] refine rules
     (a Model of an already refined mesh passes False).
     """
+    row_bytes = HISTORY_ROW_BYTES
     if isinstance(scene_or_counts, MeshCounts):
         counts = scene_or_counts
     else:
@@ -434,12 +438,16 @@ def estimate(scene_or_counts, *, materials=None, solver=None, adapt=None, refine
         materials = scene.materials if materials is None else materials
         solver = scene.solver if solver is None else solver
         adapt = getattr(scene, "adapt", ()) if adapt is None else adapt
+        row_bytes = (HISTORY_ROW_BYTES + HISTORY_BYTES_PER_PROBE * len(getattr(scene, "probes", ()))
+                     + HISTORY_BYTES_PER_FIXED * len(getattr(scene, "fixed", ())))
     materials = materials if materials is not None else [DEFAULT_MATERIAL]
     solver = solver if solver is not None else DEFAULT_SOLVER
     adapt = list(adapt or ())
     if refinement:
         counts = _refined(counts, adapt)
-    return _Estimator(counts, list(materials), solver, adapt).run()
+    estimator = _Estimator(counts, list(materials), solver, adapt)
+    estimator.history_row_bytes = row_bytes
+    return estimator.run()
 
 
 def scene_counts(scene) -> MeshCounts:
@@ -465,6 +473,8 @@ def _refined(counts: MeshCounts, adapt) -> MeshCounts:
 
 class _Estimator:
     """The phase model of the module docstring, for one set of counts."""
+
+    history_row_bytes = HISTORY_ROW_BYTES        # estimate() adds the scene's probes and [[fixed]] entries
 
     def __init__(self, counts: MeshCounts, materials, solver, adapt):
         self.c, self.solver = counts, solver
@@ -556,7 +566,7 @@ class _Estimator:
         }
         phase = max(phases, key=lambda name: sum(phases[name].values()))
         parts = {"runtime": BASELINE + KERNEL_CODE * (self.kernels - 1), "mesh": mesh,
-                 "history": min(self.solver.steps, HISTORY_ROWS) * HISTORY_ROW_BYTES, **phases[phase]}
+                 "history": min(self.solver.steps, HISTORY_ROWS) * self.history_row_bytes, **phases[phase]}
         parts = {k: int(v) for k, v in parts.items()}
         return Estimate(bytes=sum(parts.values()), parts=parts, phase=phase,
                         seconds_per_step=self._seconds(), steps=int(self.solver.steps), nodes=c.nodes,

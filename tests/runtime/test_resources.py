@@ -263,3 +263,36 @@ def test_estimate_is_above_a_measured_run_and_within_twice_it(element, project):
     peak, est = _measured_peak(data)
     arrays = est.bytes - est.parts["runtime"]
     assert peak <= arrays <= 2 * peak
+
+
+def test_history_rows_count_the_probes_and_the_reactions():
+    """Every kept history row holds each probe's vector and each [[fixed]] entry's force and moment."""
+    text = """
+[mesh]
+generate = "bar"
+size = [1.0, 0.2, 0.2]
+cells = [4, 1, 1]
+element = "tetra"
+[[material]]
+law = "hooke"
+E = 1e6
+nu = 0.3
+density = 1000.0
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[solver]
+kind = "implicit_euler"
+steps = 10000
+"""
+    extra = """
+[[fixed]]
+box = [[0.999, -1, -1], [1.001, 1, 1]]
+[[probe]]
+name = "tip"
+point = [1.0, 0.1, 0.1]
+"""
+    plain = resources.estimate(Scene.from_string(text, load_mesh=False)).parts["history"]
+    more = resources.estimate(Scene.from_string(text + extra, load_mesh=False)).parts["history"]
+    rows = resources.HISTORY_ROWS                                  # 10 000 steps: the bound
+    assert plain == rows * (resources.HISTORY_ROW_BYTES + resources.HISTORY_BYTES_PER_FIXED)
+    assert more - plain == rows * (resources.HISTORY_BYTES_PER_FIXED + resources.HISTORY_BYTES_PER_PROBE)
