@@ -70,6 +70,7 @@ from ...runtime.output import write_bytes_atomic
 from ...runtime.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
+from .cook import cook
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
 
@@ -471,7 +472,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement")
+                   "adaptive_beam", "refinement", "cook")
 
 
 def _resolve(benchmarks) -> list:
@@ -501,7 +502,7 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE}
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
