@@ -78,14 +78,17 @@ class RunFiles:
                 self._check_folder_extras()
         self._prepared = True
 
+    @property
+    def picture_path(self):
+        return self.out_dir / f"{self.picture}.png" if self.picture else None
+
+    @property
+    def plot_path(self):
+        return self.summary_path.with_suffix(".png") if self.plot else None
+
     def _extras(self) -> list:
         """The files beside the folder's summary: its history, and the pictures asked for."""
-        out = [self.summary_path.with_suffix(".csv")]
-        if self.picture:
-            out.append(self.out_dir / f"{self.picture}.png")
-        if self.plot:
-            out.append(self.summary_path.with_suffix(".png"))
-        return out
+        return [p for p in (self.summary_path.with_suffix(".csv"), self.picture_path, self.plot_path) if p]
 
     def _check_folder_extras(self) -> None:
         self._check_beside(self.summary_path, self._extras())
@@ -151,7 +154,7 @@ class RunFiles:
 
     def _pictures(self, data, stopped, sim) -> dict:
         """The picture and plot entries of data["output"] (paths; the picture drawn here)."""
-        out = {"plot": str(self.summary_path.with_suffix(".png")) if self.plot and data.get("per_step") else None,
+        out = {"plot": str(self.plot_path) if self.plot and data.get("per_step") else None,
                "picture": None}
         if not self.picture:
             return out
@@ -160,7 +163,7 @@ class RunFiles:
                                       else "no simulation state to draw")
             return out
         from .picture import picture_of_simulation
-        path = self.out_dir / f"{self.picture}.png"
+        path = self.picture_path
         try:
             picture_of_simulation(sim, path, self.picture, step=sim.step, time=sim.time)
         except TensormassError as exc:           # the summary is still written; the error raised after it

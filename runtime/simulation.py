@@ -301,8 +301,7 @@ class Simulation:
                    "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
             if keep:             # probes and reactions only for the rows the history keeps
                 row["probes"] = model.probe_values(self.ctx.u)
-                row["reactions"] = {name: {"force": r["force"].tolist(), "moment": np.ravel(r["moment"]).tolist()}
-                                    for name, r in self.reactions().items()}
+                row["reactions"] = _as_lists(self.reactions(), ("force", "moment"))
             self._history.add(row)
             if frame:
                 self._write(k, check.flag)
@@ -457,7 +456,7 @@ class Simulation:
         if self.ctx is None or not self._step:
             return {}
         try:
-            return {name: {k: np.ravel(v).tolist() for k, v in r.items()} for name, r in self.reactions().items()}
+            return _as_lists(self.reactions(), ("force", "moment", "point"))
         except (ValueError, ArithmeticError):        # a state that failed: the history has the last good ones
             return {}
 
@@ -466,6 +465,11 @@ class Simulation:
         if not names:
             return None
         return {"names": list(names), "law_ids": self.model.law_names(), "fields": _fields.describe(names)}
+
+
+def _as_lists(reactions: dict, keys) -> dict:
+    """Simulation.reactions() as JSON-ready lists (2D moments: a one-element list)."""
+    return {name: {k: np.ravel(r[k]).tolist() for k in keys} for name, r in reactions.items()}
 
 
 def _run_files(scene, output, json, overwrite):
