@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 from ..runtime.errors import TensormassError
-from ..runtime.output import SUMMARY_FORMAT, check_writable, is_summary_file
+from ..runtime.output import SUMMARY_FORMAT, check_png_path, is_summary_file
 
 __all__ = ["add_plot_command", "cmd_plot"]
 
@@ -34,15 +34,11 @@ def cmd_plot(args) -> int:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise TensormassError(f"plot {source}: cannot read the summary ({exc})") from None
     out = Path(args.out) if args.out else source.with_suffix(".png")
-    if out.suffix.lower() != ".png":
-        raise TensormassError(f"-o {out}: the file name must end in .png")
+    check_png_path(out, "-o")
     if out.resolve() == source.resolve():
         raise TensormassError(f"-o {out}: is the summary itself")
-    if out.is_dir():
-        raise TensormassError(f"-o {out}: is a folder; give a file name")
     if not out.parent.is_dir():
         raise TensormassError(f"-o {out}: folder {out.parent} does not exist")
-    check_writable(out.parent, "-o")
     panels = plot_history(summary, out, what=args.what)
     if not args.quiet:
         print(f"wrote {out} ({', '.join(panels)})")

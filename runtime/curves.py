@@ -21,12 +21,11 @@ is not *.png or cannot be written. The PNG is written atomically.
 from __future__ import annotations
 
 import io
-from pathlib import Path
 
 import numpy as np
 
 from .errors import TensormassError
-from .output import OutputError, write_bytes_atomic
+from .output import OutputError, check_png_path, write_bytes_atomic
 
 __all__ = ["plot_history", "render_history", "history_panels", "history_groups", "GROUPS"]
 
@@ -44,11 +43,7 @@ def plot_history(summary: dict, path, what=None, size=(1000, None)) -> list:
 
     what: None (every group the summary has), a list of GROUPS names, or a comma-separated
     string of them. size: (width, height) in pixels; height None: 250 per panel + the title."""
-    target = Path(path)
-    if target.suffix.lower() != ".png":
-        raise TensormassError(f"plot {target}: the file name must end in .png")
-    if target.is_dir():
-        raise TensormassError(f"plot {target}: is a folder; give a file name")
+    target = check_png_path(path, "plot")
     png, panels = render_history(summary, what=what, size=size)
     try:
         write_bytes_atomic(target, png)

@@ -66,7 +66,7 @@ from ..generator.pipeline import write_atomic
 from .errors import TensormassError
 
 __all__ = ["Writer", "OutputError", "write_bytes_atomic", "write_json_atomic", "write_text_atomic",
-           "write_summary", "check_summary_path", "is_summary_file", "check_writable", "xml_comment",
+           "write_summary", "check_summary_path", "is_summary_file", "check_writable", "check_png_path", "xml_comment",
            "PVD_MARKER", "SUMMARY_FORMAT"]
 
 PVD_MARKER = "<!-- tensormass frames -->"
@@ -224,6 +224,22 @@ def _check_existing_summary(path: Path, what: str = "--json") -> None:
     if not is_summary_file(path):
         raise TensormassError(f"{what} {path}: exists and is not a tensormass summary (no "
                               f'"format": "{SUMMARY_FORMAT}"); refusing to replace it, remove it or give another name')
+
+
+def check_png_path(path, what: str) -> Path:
+    """A PNG target, checked before drawing: a *.png name, not a folder, a link or a device, in a
+    folder that can be written (created if missing). Raises TensormassError naming what and path."""
+    target = Path(path)
+    if target.suffix.lower() != ".png":
+        raise TensormassError(f"{what} {target}: the file name must end in .png")
+    if target.is_dir():
+        raise TensormassError(f"{what} {target}: is a folder; give a file name")
+    if os.path.islink(target):
+        raise TensormassError(f"{what} {target}: is a symbolic link; refusing to replace it")
+    if target.exists() and not target.is_file():
+        raise TensormassError(f"{what} {target}: exists and is not a regular file")
+    check_writable(target.parent, what)
+    return target
 
 
 def write_summary(path, data: dict) -> None:

@@ -47,7 +47,7 @@ import numpy as np
 
 from .. import elements as _types
 from .errors import TensormassError
-from .output import OutputError, check_writable, write_bytes_atomic
+from .output import OutputError, check_png_path, write_bytes_atomic
 
 __all__ = ["write_picture", "picture_of_simulation", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
 
@@ -177,17 +177,7 @@ def pick_field(values, field_name: str, n_points: int, n_cells: int, displacemen
 
 
 def _check_path(path) -> Path:
-    target = Path(path)
-    if target.suffix.lower() != ".png":
-        raise TensormassError(f"picture {target}: the file name must end in .png")
-    if target.is_dir():
-        raise TensormassError(f"picture {target}: is a folder; give a file name")
-    if os.path.islink(target):
-        raise TensormassError(f"picture {target}: is a symbolic link; refusing to replace it")
-    if target.exists() and not target.is_file():
-        raise TensormassError(f"picture {target}: exists and is not a regular file")
-    check_writable(target.parent, "picture")
-    return target
+    return check_png_path(path, "picture")
 
 
 def _finite(name: str, arr: np.ndarray) -> None:
