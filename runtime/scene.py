@@ -123,6 +123,7 @@ class Material:
     nu: float | None = None
     params: dict = field(default_factory=dict)   # native parameters instead of E, nu (mu=, lam=, C10=, ...)
     density: float = 1000.0
+    formulation: str = "displacement"    # runtime.formulations: displacement | mean_dilatation | nodal_pressure
 
     def native_parameters(self) -> dict:
         """The law's native parameters as floats (from E, nu or as given; laws validates E and nu)."""
