@@ -33,10 +33,10 @@ import numpy as np
 from .. import generated, laws
 from ..backends import BACKENDS
 from ..generator import GENERATOR_VERSION
-from ..generator.catalogue import entries
+from ..generator.catalogue import entries, measure_entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
-from ..generator import shape_tables
+from ..generator import shape_tables, volumetric
 from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
                               TensormassError)
 from ..runtime.output import check_writable
@@ -73,8 +73,12 @@ def cmd_list(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    selected = entries(_names(args.element, ELEMENTS, "element"), _names(args.law, laws.names(), "law"),
-                       _names(args.quadrature, None, "quadrature"))
+    elements, quadratures = _names(args.element, ELEMENTS, "element"), _names(args.quadrature, None, "quadrature")
+    law_names = _names(args.law, laws.names() + laws.measure_names(), "law")
+    selected = entries(elements, law_names, quadratures)
+    if law_names is None:                  # the whole catalogue: the formulations' measure kernels too
+        selected = sorted(selected + [e for e in measure_entries() if (elements is None or e.element in elements)
+                                      and (quadratures is None or e.quadrature in quadratures)])
     backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
     unknown = sorted(set(backends) - set(BACKENDS))
     if unknown:
@@ -84,6 +88,7 @@ def cmd_generate(args) -> int:
     out = _output_folder(args.out)
     generate_all(selected, backends, out, constants=args.constants)
     shape_tables.write(out)                # N, dN/dxi for consistent loads and masses (runtime/loads.py)
+    volumetric.write(out)                  # U(theta) of every law, for the locking-free formulations
     if "numba" in backends and not args.no_compile and args.constants == "precompute":
         report_numba_compile_times(selected, out)
     return 0
@@ -105,6 +110,7 @@ def check(selected, backends) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         generate_all(selected, backends, Path(tmp))
         shape_tables.write(Path(tmp))      # compared below like every generated file
+        volumetric.write(Path(tmp))
         fresh = Path(tmp)
         differing = []
         for path in sorted(fresh.rglob("*")):

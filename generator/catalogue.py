@@ -23,15 +23,16 @@ class Entry:
 def quadratures(element: str, law: str) -> list[str]:
     """gauss1..3 everywhere; 'exact' where the integrand is a polynomial (Hooke, StVK on simplices)."""
     names = list(GAUSS_RULES)
-    if exact_degree(element, laws.get(law)) is not None:
+    if exact_degree(element, laws.kernel_law(law)) is not None:
         names.append(EXACT)
     return names
 
 
 def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]:
-    """Catalogue entries, sorted, filtered by the given names (None = all). Unknown names raise."""
+    """Catalogue entries, sorted, filtered by the given names (None = every element and every
+    material law; volume measures only when named). Unknown names raise."""
     elements = _check("element", elements, sorted(ELEMENTS))
-    law_names = _check("law", law_names, laws.names())
+    law_names = laws.names() if law_names is None else _check("law", law_names, laws.names() + laws.measure_names())
     found = []
     for e in elements:
         for law in law_names:
@@ -46,9 +47,22 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
     return sorted(found)
 
 
+def measure_entries() -> list[Entry]:
+    """The volume-measure kernels of the locking-free formulations (runtime.formulations): every
+    measure, on the elements some formulation supports, at every quadrature."""
+    from ..runtime.formulations import FORMULATIONS
+    supported = sorted({e for allowed in FORMULATIONS.values() if allowed for e in allowed} & set(ELEMENTS))
+    return entries(supported, laws.measure_names())
+
+
+def catalogue() -> list[Entry]:
+    """What generated/ holds: every material law's entries and the measure kernels."""
+    return sorted(entries() + measure_entries())
+
+
 def _check(kind, given, known):
     if given is None:
-        return known
+        return known[:]
     unknown = [g for g in given if g not in known]
     if unknown:
         raise ValueError(f"unknown {kind} {', '.join(unknown)}; known: {', '.join(known)}")

@@ -123,7 +123,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         raise ValueError(f"unknown constants mode {constants!r}; use one of {', '.join(CONSTANTS_MODES)}")
     recompute = constants == "recompute"
     ref = get_element(element_name)
-    law = laws_pkg.get(law_name)
+    law = laws_pkg.kernel_law(law_name)
     rule = resolve_rule(element_name, law, quadrature)
     dim, n = ref.dim, ref.n_nodes
     deriv = law_derivatives(law, dim)

@@ -13,7 +13,7 @@ from functools import lru_cache
 
 from .base import Law, LawError, lame_from_E_nu
 
-__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names", "is_quadratic"]
+__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names", "is_quadratic", "measure_names", "kernel_law"]
 
 
 @lru_cache(maxsize=None)
@@ -34,12 +34,27 @@ def names() -> list[str]:
     return list(_registry())
 
 
+def measure_names() -> list[str]:
+    """The volume measures (laws/measures.py): parameter-free "laws" the generator builds kernels
+    for, which the locking-free formulations use; not materials."""
+    from .measures import MEASURES
+    return sorted(MEASURES)
+
+
 def get(name: str) -> Law:
     """The law called ``name``; a LawError naming the known laws otherwise."""
     try:
         return _registry()[name]
     except KeyError:
         raise LawError(f"unknown law {name!r}; known laws: {', '.join(names())}") from None
+
+
+def kernel_law(name: str) -> Law:
+    """What a kernel integrates: a law, or a volume measure (generator and kernel loader)."""
+    from .measures import MEASURES
+    if name in MEASURES:
+        return MEASURES[name][0]
+    return get(name)
 
 
 @lru_cache(maxsize=None)

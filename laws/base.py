@@ -38,7 +38,7 @@ class Law:
         """Native parameters from either (E, nu) or the native names, validated."""
         if native and (E is not None or nu is not None):
             raise LawError(f"law {self.name!r}: give either E and nu or native parameters, not both")
-        if not native:
+        if not native and self.parameters:
             if E is None or nu is None:
                 raise LawError(f"law {self.name!r} needs E and nu (or native parameters {', '.join(self.parameters)})")
             native = self.from_E_nu(*validate_E_nu(E, nu))

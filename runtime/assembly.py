@@ -482,7 +482,17 @@ class Assembler:
 
     def __init__(self, model, parallel: bool | None = None):
         self.model = model
-        self.pattern = SparsePattern([p.dofs for p in model.parts], model.n_dofs, model.dofs_per_node)
+        couplings = getattr(model, "couplings", [])
+        # nodal-pressure couplings join the nodes around a node: their patches widen the pattern
+        extra = [t for c in couplings for t in c.patch_tables]
+        self.pattern = SparsePattern([p.dofs for p in model.parts] + extra, model.n_dofs, model.dofs_per_node)
+        n_parts = len(model.parts)
+        extra_positions = iter(self.pattern.positions[n_parts:])
+        self.pattern.positions = self.pattern.positions[:n_parts]
+        for c in couplings:
+            c.positions = self.pattern.positions[c.part_index][c.rows]
+            c.patch_positions = [next(extra_positions) for _ in c.patch_tables]
+        self.couplings = couplings
         self._parallel_option = parallel
         # Parts of a law quadratic in grad u (Hooke) have a constant K and f_int = -K u:
         # their K is assembled once (again after a law switch) instead of at every call.
@@ -690,7 +700,7 @@ class Assembler:
             for i, p in self._varying():
                 self._evaluate(i, "energy", u, None, None, False)
                 W += float(self.plans[i].energy.sum())
-            return W
+            return W + self._couple(u, None, None, False)
         finally:
             self.time += time.perf_counter() - start
 
@@ -701,6 +711,7 @@ class Assembler:
             u, f, _ = self._start(u, True, False)
             for i, _p in self._varying():
                 self._evaluate(i, "forces", u, f, None, False)
+            self._couple(u, f, None, False)
             return f
         finally:
             self.time += time.perf_counter() - start
@@ -712,6 +723,7 @@ class Assembler:
             u, _, data = self._start(u, False, True)
             for i, _p in self._varying():
                 self._evaluate(i, "stiffness", u, None, data, self._projected(i, project))
+            self._couple(u, None, data, project)
             return data
         finally:
             self.time += time.perf_counter() - start
@@ -723,9 +735,17 @@ class Assembler:
             u, f, data = self._start(u, True, True)
             for i, _p in self._varying():
                 self._evaluate(i, "forces_and_stiffness", u, f, data, self._projected(i, project))
+            self._couple(u, f, data, project)
             return f, data
         finally:
             self.time += time.perf_counter() - start
+
+    def _couple(self, u, f, data, project) -> float:
+        """The locking-free formulations' volumetric terms (runtime.volumetric); their energy."""
+        if not self.couplings:
+            return 0.0
+        U = u.reshape(self.model.n_points, self.model.dofs_per_node)
+        return sum(c.evaluate(U, f, data, bool(project)) for c in self.couplings)
 
     def element_forces(self, part, u: np.ndarray) -> np.ndarray:
         """(n_active, k * dim) element internal forces of one part (criteria such as R_S)."""

@@ -157,9 +157,14 @@ class FieldEvaluator:
         chunks of CHUNK elements (the temporaries of a frame stay small on big meshes)."""
         model = self.model
         U = model.nodal(np.asarray(u, dtype=float).reshape(-1))
-        for part in model.parts:
+        couplings = {c.part_index: c for c in getattr(model, "couplings", [])}
+        for i, part in enumerate(model.parts):
             if part.n_active == 0:
                 continue
+            coupling = couplings.get(i)
+            if coupling is not None:          # a locking-free formulation: add its volumetric part
+                pressure, density = coupling.cell_terms(U)
+                row_of = coupling.part_rows(len(part.cells))
             kernel = part.kernel
             if not has_stress(kernel):
                 raise _no_stress(part, asked)
@@ -180,7 +185,26 @@ class FieldEvaluator:
                 if d == 2:                       # plane strain: F33 = 1, sigma33 from P33
                     F3[..., 2, 2] = 1.0
                     P3[..., 2, 2] = S[..., layout["P33"]]
-                yield ids, S[..., layout["v"]], S[..., layout["W"]], F3, P3
+                W = S[..., layout["W"]]
+                if coupling is not None:
+                    self._add_volumetric(coupling, row_of[start:start + len(ids)], pressure, density, U, W, P3)
+                yield ids, S[..., layout["v"]], W, F3, P3
+
+    @staticmethod
+    def _add_volumetric(coupling, rows, pressure, density, U, W, P3):
+        """P += p_e dtheta/dF and W += u_e on the formulated cells of a chunk (runtime.volumetric)."""
+        mine = np.flatnonzero(rows >= 0)
+        if not mine.size:
+            return
+        r = rows[mine]
+        Sm = coupling.kernel.stress(coupling.D[r], np.ascontiguousarray(U[coupling.cells[r]]))
+        layout, d = coupling.kernel.stress_record["offsets"], coupling.kernel.dim
+        Pm = np.zeros(Sm.shape[:2] + (3, 3))
+        Pm[..., :d, :d] = Sm[..., layout["P"]:layout["P"] + d * d].reshape(Sm.shape[:2] + (d, d))
+        if d == 2:
+            Pm[..., 2, 2] = Sm[..., layout["P33"]]
+        P3[mine] += pressure[r][:, None, None, None] * Pm
+        W[mine] += density[r][:, None]
 
     def _ids_of(self, name: str) -> np.ndarray:
         """material, law or region of every cell (global order); law switching changes `law`."""

@@ -96,7 +96,7 @@ class Kernel:
         return X
 
     def _params(self, n: int, E, nu, native) -> np.ndarray:
-        values = laws.get(self.law).native_parameters(E=E, nu=nu, **native)
+        values = laws.kernel_law(self.law).native_parameters(E=E, nu=nu, **native)
         table = np.empty((n, len(self.parameters)))
         for k, p in enumerate(self.parameters):
             try:

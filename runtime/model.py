@@ -36,6 +36,7 @@ from .probes import PointProbe, locate_point
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from .scene import Loads, Output, Solver
+from .volumetric import VolumetricCoupling, check_formulation, volumetric_functions
 from .scene_mesh import build_mesh, scene_mesh
 
 # outputs_for (runtime.integrators), build_mesh and scene_mesh (runtime.scene_mesh) are kept
@@ -115,6 +116,26 @@ class LawGroup:
         return int(changed.size)
 
 
+@dataclass
+class _Formulated:
+    """Cells of a part under a locking-free formulation, until their coupling is built."""
+    formulation: str
+    rows: np.ndarray             # part-local cell indices
+    materials: np.ndarray        # material index of each of those cells
+    law: str
+    part: int = -1
+    full_params: dict | None = None
+
+    def deviatoric(self, part: int, params: dict) -> dict:
+        """The part's parameters with the bulk one set to 0 on these cells (W_dev); keeps the full ones."""
+        self.part, self.full_params = part, params
+        bulk = volumetric_functions(self.law)[0]
+        out = dict(params)
+        out[bulk] = np.array(params[bulk], dtype=float, copy=True)
+        out[bulk][self.rows] = 0.0
+        return out
+
+
 # --------------------------------------------------------------------------- mesh and materials
 
 
@@ -166,7 +187,10 @@ class Model:
         self.outputs = outputs_for(self.solver.kind)
         self.adapt = adapt
         self.groups: list = []                     # LawGroup per set of switchable cells
+        self._pending_couplings: list = []
         self.parts = self._build_parts()
+        # locking-free formulations: the volumetric energy of formulated cells (runtime.volumetric)
+        self.couplings = self._build_couplings()
         self.mass = self._lumped_mass()
         self.mass_matrix = self._mass_matrix      # runtime.mass.MassMatrix (solver.mass)
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
@@ -217,9 +241,11 @@ class Model:
         index = assign_materials(mesh, scene.materials)
         outputs = outputs_for(scene.solver.kind)
         keys = set()
-        for (element, law, quad) in material_groups(mesh, scene.materials, index):
+        for (element, law, quad), members in material_groups(mesh, scene.materials, index).items():
             for reach in reachable_laws(law, getattr(scene, "adapt", ())):
                 keys.add((element, reach, quad, outputs))
+            if any(getattr(scene.materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
+                keys.add((element, volumetric_functions(law)[1], quad, outputs))     # its volume measure
         return keys
 
     # -- parts ---------------------------------------------------------------------------------
@@ -234,20 +260,48 @@ class Model:
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
             reach = reachable_laws(law, self.adapt)
             first = len(parts)
+            formulated = self._formulated(element, law, members, reach)
             for k, name in enumerate(reach):
                 # a module attribute lookup, so tests can spy on which kernels get loaded
                 kernel = _custom.registered_kernel(element, name, quad)
                 if kernel is None:
                     kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
                 self._check_kernel_dofs(kernel, element, cells)
-                D = self._constants(kernel, cells, cell_ids, self._parameters(name, members))
+                params = self._parameters(name, members)
+                if formulated is not None:
+                    params = formulated.deviatoric(len(parts), params)
+                D = self._constants(kernel, cells, cell_ids, params)
                 volume = kernel.point_volumes(D).sum(axis=1)       # the layout from the kernel's metadata
                 active = np.full(len(cells), k == 0)
                 parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active))
             if len(reach) > 1:
                 self.groups.append(LawGroup(list(range(first, len(parts))), list(reach),
                                             np.zeros(len(cells), dtype=np.int64)))
+            if formulated is not None:
+                self._pending_couplings.append(formulated)
         return parts
+
+    def _formulated(self, element, law, members, reach):
+        """The cells of this part a locking-free formulation models (runtime.volumetric), or None."""
+        rows, start, names, mats = [], 0, set(), []
+        for _, ids, m in members:
+            name = getattr(self.materials[m], "formulation", "displacement") or "displacement"
+            if name != "displacement":
+                check_formulation(name, element)
+                rows.append(np.arange(start, start + len(ids)))
+                mats.append(np.full(len(ids), m))
+                names.add(name)
+            start += len(ids)
+        if not rows:
+            return None
+        if len(reach) > 1:
+            raise TensormassError(f"law {law!r} on {element}: the formulation {sorted(names)[0]!r} cannot be "
+                                  "combined with [[adapt]] switch_law rules (not supported yet)")
+        return _Formulated(sorted(names)[0], np.concatenate(rows), np.concatenate(mats), law)
+
+    def _build_couplings(self) -> list:
+        pending, self._pending_couplings = self._pending_couplings, []
+        return [VolumetricCoupling(self, p.part, p.rows, p.formulation, p.full_params, p.materials) for p in pending]
 
     def _parameters(self, law: str, members) -> dict:
         """Native law parameters, one value per cell (materials may differ within a part)."""

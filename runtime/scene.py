@@ -333,7 +333,7 @@ class Scene:
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
         "amplitude")
 _MESH = ("generate", "file", "size", "cells", "element", "origin")
-_MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density")
+_MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
 _LOADS = ("gravity", "force", "traction", "pressure", "gravity_amplitude")
@@ -618,7 +618,8 @@ class _Parser:
             E = self.number(t["E"], f"{key}.E")
             nu = self.number(t["nu"], f"{key}.nu")
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
-                       params=native, density=density)
+                       params=native, density=density,
+                       formulation=self.string(t.get("formulation", "displacement"), f"{key}.formulation"))
         try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:

@@ -1,0 +1,212 @@
+"""Locking-free formulations: a law's volumetric energy at averaged volume measures.
+
+For the cells a material models with formulation "mean_dilatation" or "nodal_pressure"
+(runtime.formulations), the law's split W = W_dev + U(theta) (generator.volumetric) is integrated as
+
+    Pi(u) = sum_q v_q W_dev(F_q)  +  sum_g V_g U(J_g),     J_g = Theta_g / V_g,  Theta_g = sum_e S_ge Theta_e(u)
+
+- W_dev is the part's own generated kernel with the bulk parameter set to 0 (runtime.model does so);
+- Theta_e = sum_q v_q theta(F_q) is the element energy of the measure's generated kernel, V_e its
+  value at rest (theta = 1 there) and V_g = sum_e S_ge V_e;
+- groups g: every cell (mean dilatation: S = I, Q1-P0 / P2-P0 with the pressure condensed per cell),
+  or every node with S_ge = 1/k for the k-node cells around it (nodal pressure, Bonet & Burton 1998).
+
+Pi is an energy, so forces and the (symmetric) Jacobian follow exactly:
+
+    f_int = sum_e p_e f_e,               p_e = sum_g S_ge U'(J_g),    f_e = -dTheta_e/du
+    K     = sum_e p_e K_e + sum_g U''(J_g) / V_g  b_g b_g^T,          b_g = sum_e S_ge f_e
+
+The rank-one terms couple the cells of one group: inside one cell for mean dilatation; for nodal
+pressure the nodes of the cells around a node, so the Assembler adds those patches to the sparsity
+pattern (`pattern_tables`).  The pressure of a group is U'(J_g) (runtime.fields reads it).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import laws
+from .errors import InvertedElementError, TensormassError
+
+__all__ = ["VolumetricCoupling", "volumetric_functions"]
+
+
+@lru_cache(maxsize=None)
+def volumetric_functions(law_name: str):
+    """(bulk parameter, measure law, function(theta, **params) -> (U, U', U'')) of a law.
+
+    From the committed generated/volumetric.py while the law file is unchanged; a new or edited
+    law is split now (sympy) and the same expressions are compiled in memory."""
+    from .. import generated
+    from ..generator.volumetric import law_source_hash
+    law = laws.get(law_name)
+    try:
+        from ..generated import volumetric as table
+    except ImportError:
+        table = None
+    if table is not None and law_name in table.SPLITS and table.SPLITS[law_name][2] == law_source_hash(law):
+        parameter, measure, _ = table.SPLITS[law_name]
+        return parameter, measure, table.FUNCTIONS[law_name]
+    del generated
+    return _derived(law_name)
+
+
+def _derived(law_name: str):
+    from ..generator import volumetric as gen
+    text = gen.module_text([law_name])
+    namespace: dict = {}
+    exec(compile(text, f"<volumetric split of {law_name}>", "exec"), namespace)   # our own generated code
+    parameter, measure, _ = namespace["SPLITS"][law_name]
+    return parameter, measure, namespace["FUNCTIONS"][law_name]
+
+
+class VolumetricCoupling:
+    """The volumetric energy of the cells `rows` of one part under one locking-free formulation."""
+
+    def __init__(self, model, part_index: int, rows: np.ndarray, formulation: str, params: dict,
+                 materials: np.ndarray):
+        from . import kernels as _kernels
+        part = model.parts[part_index]
+        self.part_index, self.formulation, self.law = part_index, formulation, part.law
+        self.parameter, self.measure, self.function = volumetric_functions(part.law)
+        self.rows = np.asarray(rows, dtype=np.int64)
+        self.cells = np.ascontiguousarray(part.cells[self.rows], dtype=np.int64)
+        self.dofs = np.ascontiguousarray(part.dofs[self.rows], dtype=np.int64)
+        self.cell_ids = part.cell_ids[self.rows]
+        self.kernel = _kernels.load_kernel(part.element, self.measure, part.quadrature, backend=model.solver.backend)
+        self.D = self.kernel.constants(model.mesh.points[self.cells])
+        self.cell_volume = self.kernel.point_volumes(self.D).sum(axis=1)
+        self.dpn = model.dofs_per_node
+        n, k = self.cells.shape
+        self.S = self._groups(np.asarray(materials), n, k)
+        self.V = self.S @ self.cell_volume
+        first = self.S.indices[self.S.indptr[:-1]]           # a cell of each group (one material per group)
+        self.params = {p: np.ascontiguousarray(np.broadcast_to(v, (len(part.cells),))[self.rows][first])
+                       for p, v in params.items()}
+        self.ST = self.S.T.tocsr()
+        self.positions = None              # (n, nd, nd) CSR positions of the cells; set by the Assembler
+        self.patch_positions = []          # per patch table (nodal pressure); set by the Assembler
+        self.pressure = np.zeros(self.S.shape[0])
+        self.needs_positive = law_needs_positive(self.function, self.params)
+
+    # -- groups ----------------------------------------------------------------------------------
+    def _groups(self, materials, n, k):
+        """S (groups x cells): the identity for mean dilatation; 1/k per (material, node) for nodal pressure."""
+        self.patch_tables, self._patch_index = [], []
+        if self.formulation == "mean_dilatation":
+            return sp.identity(n, format="csr")
+        mat = np.repeat(materials, k)
+        node = self.cells.ravel()
+        keys = np.stack([mat, node], axis=1)
+        groups, group_of = np.unique(keys, axis=0, return_inverse=True)
+        group_of = group_of.reshape(n, k)
+        cell = np.repeat(np.arange(n), k)
+        S = sp.csr_matrix((np.full(n * k, 1.0 / k), (group_of.ravel(), cell)), shape=(len(groups), n))
+        S.sum_duplicates()
+        self._build_patches(group_of, len(groups))
+        return S
+
+    def _build_patches(self, group_of, n_groups):
+        """The nodes around each node group, their dof tables by size, and the map B: cell forces -> b_g."""
+        n, k = self.cells.shape
+        dpn = self.dpn
+        # (group, neighbour node) for every cell of the group and every node of that cell
+        g = np.repeat(group_of, k, axis=1).ravel()                 # (n k k): group of (e, i), repeated over j
+        nb = np.tile(self.cells, (1, k)).ravel()                    # node j of cell e
+        pairs = np.unique(np.stack([g, nb], axis=1), axis=0)        # sorted by group, then node
+        size = np.bincount(pairs[:, 0], minlength=n_groups)
+        start = np.concatenate([[0], np.cumsum(size)])
+        # slot of (group, node) in the flat b vector: (start[g] + position of node) * dpn + c
+        key = pairs[:, 0] * (self.cells.max() + 1) + pairs[:, 1]
+        where = np.searchsorted(key, g * (self.cells.max() + 1) + nb)
+        comp = np.arange(dpn)
+        rows = (where[:, None] * dpn + comp).ravel()
+        e = np.repeat(np.arange(n), k * k)
+        j = np.tile(np.repeat(np.arange(k)[None, :], k, axis=0).ravel(), n)
+        cols = ((e * k + j)[:, None] * dpn + comp).ravel()
+        self.B = sp.csr_matrix((np.full(rows.size, 1.0 / k), (rows, cols)), shape=(len(pairs) * dpn, n * k * dpn))
+        self.B.sum_duplicates()
+        for s in np.unique(size):
+            members = np.flatnonzero(size == s)
+            nodes = pairs[:, 1][start[members][:, None] + np.arange(s)]
+            self.patch_tables.append((nodes[:, :, None] * dpn + comp).reshape(len(members), s * dpn))
+            slots = (start[members][:, None] * dpn + np.arange(s * dpn))
+            self._patch_index.append((members, slots))
+
+    # -- evaluation ------------------------------------------------------------------------------
+    def evaluate(self, U: np.ndarray, f: np.ndarray | None, data: np.ndarray | None, project: bool = False) -> float:
+        """Add this coupling's forces into f and Jacobian into the CSR data (either may be None);
+        returns its energy sum_g V_g U(J_g)."""
+        from .assembly import _scatter_matrix, _scatter_vector, project_psd
+        ue = np.ascontiguousarray(U[self.cells])
+        theta = self.kernel.energy(self.D, ue)
+        fe = Ke = None
+        if data is not None:
+            fe, Ke = self.kernel.forces_and_stiffness(self.D, ue)
+        elif f is not None:
+            fe = self.kernel.forces(self.D, ue)
+        J = (self.S @ theta) / self.V
+        if self.needs_positive and not np.all(J > 0):
+            bad = np.unique(self.S[np.flatnonzero(~(J > 0))].indices)
+            raise InvertedElementError(f"{self.formulation}: mean volume ratio <= 0 (inverted cells) where law "
+                                       f"{self.law!r} is undefined", self.cell_ids[bad])
+        with np.errstate(all="ignore"):
+            Ug, dU, d2U = (np.broadcast_to(np.asarray(x, dtype=float), J.shape) for x in self.function(J, **self.params))
+        self.pressure = np.array(dU)
+        p = self.ST @ dU
+        if f is not None:
+            _scatter_vector(f, np.ascontiguousarray(p[:, None] * fe), self.dofs)
+        if data is not None:
+            Ke *= p[:, None, None]
+            c = d2U / self.V
+            if project:
+                c = np.maximum(c, 0.0)
+            if self.formulation == "mean_dilatation":
+                Ke += c[:, None, None] * fe[:, :, None] * fe[:, None, :]
+                if project:
+                    project_psd(Ke, out=Ke)
+                _scatter_matrix(data, Ke, self.positions, 1.0)
+            else:
+                if project:
+                    project_psd(Ke, out=Ke)
+                _scatter_matrix(data, Ke, self.positions, 1.0)
+                b = self.B @ fe.ravel()
+                for (members, slots), pos in zip(self._patch_index, self.patch_positions):
+                    bs = b[slots]
+                    _scatter_matrix(data, np.ascontiguousarray(c[members, None, None] * bs[:, :, None] * bs[:, None, :]),
+                                    pos, 1.0)
+        return float(np.dot(self.V, Ug))
+
+    def cell_terms(self, U: np.ndarray) -> tuple:
+        """(p_e, u_e) per cell at nodal displacements U: the factor of the measure's stress in the
+        cell's stress (P = P_dev + p_e dtheta/dF at every point) and its volumetric energy density
+        (sum_e V_e u_e = sum_g V_g U(J_g)); runtime.fields adds them to the part's records."""
+        theta = self.kernel.energy(self.D, np.ascontiguousarray(U[self.cells]))
+        J = (self.S @ theta) / self.V
+        with np.errstate(all="ignore"):
+            Ug, dU, _ = (np.broadcast_to(np.asarray(x, dtype=float), J.shape) for x in self.function(J, **self.params))
+        return self.ST @ dU, self.ST @ Ug
+
+    def part_rows(self, n_part_cells: int) -> np.ndarray:
+        """For every cell of the part, its row in this coupling (-1: not formulated)."""
+        index = np.full(n_part_cells, -1, dtype=np.int64)
+        index[self.rows] = np.arange(len(self.rows))
+        return index
+
+
+def law_needs_positive(function, params) -> bool:
+    """True when U is undefined for theta <= 0 (ln theta): NaN at theta = -1 says so."""
+    with np.errstate(all="ignore"):
+        values = function(np.array([-1.0]), **{p: v[:1] if np.ndim(v) else v for p, v in params.items()})
+    return not all(np.all(np.isfinite(np.asarray(x, dtype=float))) for x in values)
+
+
+def check_formulation(formulation: str, element: str) -> None:
+    from .formulations import FORMULATIONS, supports
+    if formulation not in FORMULATIONS:
+        raise TensormassError(f"unknown formulation {formulation!r}; known: {', '.join(FORMULATIONS)}")
+    if not supports(formulation, element):
+        raise TensormassError(f"formulation {formulation!r} does not apply to {element} "
+                              f"(it supports {', '.join(FORMULATIONS[formulation])})")

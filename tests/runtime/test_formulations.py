@@ -1,0 +1,228 @@
+"""Locking-free formulations (runtime.volumetric): exact derivatives, patch and rigid-motion tests
+for every formulation x element x law, the split of every law, and that they cure locking."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tensormass as tm
+from tensormass import laws
+from tensormass.generator.volumetric import split
+from tensormass.runtime.assembly import Assembler
+from tensormass.runtime.formulations import FORMULATIONS
+from tensormass.runtime.mesh import CellBlock, Mesh, generate_bar
+from tensormass.runtime.model import Model
+from tensormass.runtime.scene import Material
+from tensormass.runtime.uniform import to_quadratic
+
+CASES = [(form, el) for form, els in FORMULATIONS.items() if els for el in els]
+LAWS = laws.names()
+
+
+def _mesh(element: str, seed: int = 0) -> Mesh:
+    """A small bar with its interior nodes moved off the grid (unstructured enough to catch errors)."""
+    dim = 2 if element in ("quad", "triangle", "triangle6") else 3
+    linear = {"tetra10": "tetra", "triangle6": "triangle"}.get(element, element)
+    mesh = generate_bar((1.0, 0.8, 0.6)[:dim], (2, 2, 2)[:dim], linear)
+    pts = mesh.points.copy()
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    inner = np.all((pts > lo + 1e-9) & (pts < hi - 1e-9), axis=1)
+    pts[inner] += 0.04 * np.random.default_rng(seed).standard_normal((inner.sum(), dim))
+    mesh = Mesh(pts, [CellBlock(b.type, b.cells) for b in mesh.blocks])
+    if linear != element:                 # straight-sided quadratic cells on the moved corners
+        mesh = to_quadratic(mesh)
+    pts = mesh.points
+    return mesh, np.all((pts > lo + 1e-9) & (pts < hi - 1e-9), axis=1)
+
+
+def _assembler(element, law, formulation, nu=0.45, materials=None):
+    mesh, inner = _mesh(element)
+    mats = materials or [Material(law=law, quadrature="gauss2", E=1.0, nu=nu, formulation=formulation)]
+    model = Model(mesh, mats)
+    return model, Assembler(model), inner
+
+
+@pytest.mark.parametrize("law", LAWS)
+@pytest.mark.parametrize("formulation,element", CASES)
+def test_derivatives_patch_and_rigid_motion(formulation, element, law):
+    model, asm, inner = _assembler(element, law, formulation)
+    assert len(model.couplings) == 1
+    rng = np.random.default_rng(1)
+    pts = model.mesh.points
+    dim = pts.shape[1]
+    u = 0.01 * rng.standard_normal(model.n_dofs)
+    f, data = asm.forces_and_stiffness(u)
+    K = asm.matrix(data).toarray()
+    assert np.abs(K - K.T).max() <= 1e-12 * np.abs(K).max()
+    d, h = rng.standard_normal(u.size), 1e-6
+    dW = (asm.energy(u + h * d) - asm.energy(u - h * d)) / (2 * h)
+    assert abs(dW + f @ d) <= 1e-7 * abs(dW)                                  # f = -dW/du
+    df = (asm.forces(u + h * d) - asm.forces(u - h * d)) / (2 * h)
+    assert np.abs(df + K @ d).max() <= 1e-6 * np.abs(K @ d).max()             # K = -df/du
+    # patch test: a homogeneous deformation leaves no force on interior nodes
+    A = np.eye(dim) + 0.05 * rng.standard_normal((dim, dim))
+    fh = asm.forces((pts @ A.T - pts).ravel()).reshape(-1, dim)
+    assert inner.any()
+    assert np.abs(fh[inner]).max() <= 1e-12 * np.abs(fh).max()
+    # rigid motions: translation always; rotation for every law but Hooke (small strain)
+    shift = np.tile(rng.standard_normal(dim), len(pts))
+    assert abs(asm.energy(shift)) < 1e-12 and np.abs(asm.forces(shift)).max() < 1e-12
+    if law != "hooke":
+        R = np.linalg.qr(rng.standard_normal((dim, dim)))[0]
+        if np.linalg.det(R) < 0:
+            R[:, 0] *= -1.0
+        ur = (pts @ R.T - pts).ravel()
+        assert abs(asm.energy(ur)) < 1e-12 and np.abs(asm.forces(ur)).max() < 1e-12
+
+
+@pytest.mark.parametrize("formulation,element", CASES)
+def test_homogeneous_state_same_as_displacement(formulation, element):
+    """Under a homogeneous deformation every averaged measure equals the pointwise one: energy,
+    forces and the stress fields equal the displacement formulation's."""
+    law = "neohookean"
+    ref_model, ref, _ = _assembler(element, law, "displacement")
+    model, asm, _ = _assembler(element, law, formulation)
+    pts = model.mesh.points
+    dim = pts.shape[1]
+    A = np.eye(dim) + 0.1 * np.random.default_rng(2).standard_normal((dim, dim))
+    u = (pts @ A.T - pts).ravel()
+    assert asm.energy(u) == pytest.approx(ref.energy(u), rel=1e-12)
+    assert np.allclose(asm.forces(u), ref.forces(u), rtol=0, atol=1e-12 * np.abs(ref.forces(u)).max())
+    _, cells = tm.runtime.fields.evaluate(model, u, ["cauchy_stress", "energy_density"])
+    _, ref_cells = tm.runtime.fields.evaluate(ref_model, u, ["cauchy_stress", "energy_density"])
+    for name in ("cauchy_stress", "energy_density"):
+        assert np.allclose(cells[name], ref_cells[name], rtol=1e-10, atol=1e-12)
+
+
+def test_nodal_pressure_groups_per_material():
+    """Two materials on one tetra mesh: nodes on their interface carry one pressure per material;
+    derivatives stay exact."""
+    mats = [Material(box=((-1, -1, -1), (0.5, 2, 2)), law="neohookean", quadrature="gauss1", E=1.0, nu=0.49,
+                     formulation="nodal_pressure"),
+            Material(law="neohookean", quadrature="gauss1", E=3.0, nu=0.45, formulation="nodal_pressure")]
+    model, asm, _ = _assembler("tetra", None, None, materials=mats)
+    (c,) = model.couplings
+    assert c.S.shape[0] > model.n_points           # interface nodes are counted once per material
+    rng = np.random.default_rng(4)
+    u = 0.03 * rng.standard_normal(model.n_dofs)
+    f, data = asm.forces_and_stiffness(u)
+    d, h = rng.standard_normal(u.size), 1e-6
+    dW = (asm.energy(u + h * d) - asm.energy(u - h * d)) / (2 * h)
+    assert abs(dW + f @ d) <= 1e-7 * abs(dW)
+    df = (asm.forces(u + h * d) - asm.forces(u - h * d)) / (2 * h)
+    K = asm.matrix(data)
+    assert np.abs(df + K @ d).max() <= 1e-6 * np.abs(K @ d).max()
+
+
+def test_bulk_parameter_is_zero_in_the_deviatoric_part():
+    """The part's own kernel sees the law with its bulk parameter at 0 on formulated cells only."""
+    mats = [Material(box=((-1, -1, -1), (0.5, 2, 2)), law="neohookean", E=1.0, nu=0.45, formulation="mean_dilatation"),
+            Material(law="neohookean", E=1.0, nu=0.45)]
+    model, asm, _ = _assembler("hexahedron", None, None, materials=mats)
+    part, (c,) = model.parts[0], model.couplings
+    lam = c.params["lam"]
+    assert np.allclose(lam, 1.0 * 0.45 / (1.45 * 0.1))
+    formulated = np.zeros(len(part.cells), bool)
+    formulated[c.rows] = True
+    assert 0 < formulated.sum() < len(part.cells)
+    # a cell's constants depend on lam: formulated and plain cells of equal shape differ there
+    k = part.kernel
+    material = part.D[:, k.material_offset:]
+    assert not np.allclose(material[formulated][0], material[~formulated][0])
+
+
+@pytest.mark.parametrize("law", LAWS)
+def test_split_reassembles_the_law(law):
+    """W = W|_{p=0} + U(theta(F)) at a random F, for the split the generator derives."""
+    import sympy as sp
+    from tensormass.generator.volumetric import THETA
+    from tensormass.laws.measures import MEASURES
+    s = split(law)
+    L = laws.get(law)
+    values = dict(zip(L.parameters, (1.3, 0.7, 2.1)))
+    syms = L.symbols()
+    F = sp.Matrix(3, 3, lambda i, j: sp.Rational(1 if i == j else 0) + sp.Rational((3 * i + 5 * j) % 7 - 3, 40))
+    sub = {syms[p]: v for p, v in values.items()}
+    W = L.energy(F, **syms).subs(sub)
+    dev = L.energy(F, **syms).subs({**sub, syms[s.parameter]: 0})
+    theta = MEASURES[s.measure][0].energy(F)
+    assert float(W) == pytest.approx(float(dev + s.U.subs({**sub, THETA: theta})), rel=1e-13)
+
+
+def test_generated_functions_match_the_split():
+    from tensormass.generated import volumetric as table
+    from tensormass.generator.volumetric import THETA
+    import sympy as sp
+    for law in LAWS:
+        s = split(law)
+        params = {p: 0.5 + k for k, p in enumerate(laws.get(law).parameters)}
+        U, dU, d2U = table.FUNCTIONS[law](np.array([0.9, 1.2]), **params)
+        for expr, got in zip(s.derivatives(), (U, dU, d2U)):
+            f = sp.lambdify(THETA, expr.subs({sp.Symbol(p, real=True): v for p, v in params.items()}))
+            assert np.allclose(np.broadcast_to(got, (2,)), [f(0.9), f(1.2)], rtol=1e-14)
+        assert table.SPLITS[law][:2] == (s.parameter, s.measure)
+
+
+def test_unknown_or_unsupported_formulation_is_refused():
+    mesh, _ = _mesh("tetra")
+    with pytest.raises(tm.TensormassError, match="mean_dilatation.*tetra"):
+        Model(mesh, [Material(law="neohookean", E=1.0, nu=0.45, formulation="mean_dilatation")])
+    with pytest.raises(tm.TensormassError, match="unknown formulation"):
+        Model(mesh, [Material(law="neohookean", E=1.0, nu=0.45, formulation="fbar2")])
+
+
+def _cook(element, n, formulation, nu=0.4999):
+    from tensormass.apps.reports.cook import cook_mesh
+    m = cook_mesh(element, n)
+    mesh = Mesh(m.points[:, :2], [CellBlock(element, m.cells[0].data)])
+    model = Model(mesh, [Material(law="hooke", E=1.0, nu=nu, formulation=formulation)])
+    asm = Assembler(model)
+    pts = mesh.points
+    fixed = np.flatnonzero(pts[:, 0] < 1e-9)
+    free = np.setdiff1d(np.arange(model.n_dofs), np.concatenate([2 * fixed, 2 * fixed + 1]))
+    f = np.zeros(model.n_dofs)
+    # the total unit shear load on the edge x = 48, by the edge's consistent nodal weights
+    from tensormass.apps.reports.cook import COOK_CORNERS
+    right = np.flatnonzero(pts[:, 0] > 48 - 1e-9)
+    order = right[np.argsort(pts[right, 1])]
+    y = pts[order, 1]
+    weights = np.zeros(len(order))
+    step = 2 if element == "triangle6" else 1
+    for a in range(0, len(order) - 1, step):
+        seg = order[a:a + step + 1]
+        L = y[a + step] - y[a]
+        w = [L / 6, 4 * L / 6, L / 6] if step == 2 else [L / 2, L / 2]
+        weights[a:a + step + 1] += w
+    f[2 * order + 1] = weights / (COOK_CORNERS[2][1] - COOK_CORNERS[1][1])
+    from scipy.sparse.linalg import spsolve
+    K = asm.matrix(asm.stiffness(np.zeros(model.n_dofs))).tocsr()[free][:, free]
+    u = np.zeros(model.n_dofs)
+    u[free] = spsolve(K.tocsc(), f[free])
+    corner = np.flatnonzero(np.all(np.abs(pts - COOK_CORNERS[2]) < 1e-9, axis=1))[0]
+    return u[2 * corner + 1]
+
+
+def test_mean_dilatation_cures_locking_on_cook():
+    """Cook's membrane, nu = 0.4999: the displacement quad locks, mean dilatation is within 3 % of
+    the P2-P0 triangle (triangle6 + mean dilatation) on the same 16 x 16 grid."""
+    reference = _cook("triangle6", 16, "mean_dilatation")
+    locked = _cook("quad", 16, "displacement")
+    free = _cook("quad", 16, "mean_dilatation")
+    assert locked < 0.5 * reference
+    assert abs(free - reference) < 0.03 * reference
+
+
+def test_nodal_pressure_cures_locking_of_triangles():
+    reference = _cook("triangle6", 16, "mean_dilatation")
+    locked = _cook("triangle", 16, "displacement")
+    free = _cook("triangle", 16, "nodal_pressure")
+    assert locked < 0.5 * reference
+    assert free > 0.8 * reference
+
+
+@pytest.mark.parametrize("formulation,element", [("mean_dilatation", "quad"), ("nodal_pressure", "triangle")])
+def test_compressible_material_converges_to_the_displacement_answer(formulation, element):
+    """nu = 0.3: the formulation and the displacement one approach each other as the mesh is refined."""
+    gaps = [abs(_cook(element, n, formulation, 0.3) - _cook(element, n, "displacement", 0.3)) for n in (8, 16, 32)]
+    assert gaps[2] < 0.6 * gaps[1] < 0.6 * 0.6 * gaps[0]
+    assert gaps[2] < 0.02 * _cook(element, 32, "displacement", 0.3)
