@@ -38,6 +38,7 @@ from ..runtime.output import write_json_atomic
 from ..runtime.samples import random_elements
 from .bench_assembly import add_assembly_command
 from .bench_history import add_history_command
+from .bench_formulations import add_formulations_command
 from .bench_integrators import add_integrators_command
 from .bench_organ import add_organ_command
 from .bench_steps import add_steps_command
@@ -523,6 +524,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_assembly_command(sub)
     add_organ_command(sub)
     add_history_command(sub)
+    add_formulations_command(sub)
     return bench
 
 

@@ -26,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from .. import laws
 from .errors import InvertedElementError, TensormassError
@@ -159,24 +160,21 @@ class VolumetricCoupling:
         if f is not None:
             _scatter_vector(f, np.ascontiguousarray(p[:, None] * fe), self.dofs)
         if data is not None:
-            Ke *= p[:, None, None]
             c = d2U / self.V
+            cell_c = c if self.formulation == "mean_dilatation" else np.zeros(len(p))
             if project:
-                c = np.maximum(c, 0.0)
-            if self.formulation == "mean_dilatation":
-                Ke += c[:, None, None] * fe[:, :, None] * fe[:, None, :]
-                if project:
-                    project_psd(Ke, out=Ke)
+                # PSD-projected Newton matrices: the cell terms projected per cell, rank-one terms kept >= 0
+                c, cell_c = np.maximum(c, 0.0), np.maximum(cell_c, 0.0)
+                Ke *= p[:, None, None]
+                Ke += cell_c[:, None, None] * fe[:, :, None] * fe[:, None, :]
+                project_psd(Ke, out=Ke)
                 _scatter_matrix(data, Ke, self.positions, 1.0)
             else:
-                if project:
-                    project_psd(Ke, out=Ke)
-                _scatter_matrix(data, Ke, self.positions, 1.0)
+                _scatter_cells(data, Ke, fe, p, cell_c, self.positions)
+            if self.formulation != "mean_dilatation":
                 b = self.B @ fe.ravel()
                 for (members, slots), pos in zip(self._patch_index, self.patch_positions):
-                    bs = b[slots]
-                    _scatter_matrix(data, np.ascontiguousarray(c[members, None, None] * bs[:, :, None] * bs[:, None, :]),
-                                    pos, 1.0)
+                    _scatter_patches(data, b, slots, members, c, pos)
         return float(np.dot(self.V, Ug))
 
     def cell_terms(self, U: np.ndarray) -> tuple:
@@ -194,6 +192,27 @@ class VolumetricCoupling:
         index = np.full(n_part_cells, -1, dtype=np.int64)
         index[self.rows] = np.arange(len(self.rows))
         return index
+
+
+@njit(cache=True)
+def _scatter_cells(data, Ke, fe, p, c, pos):
+    """data += p_e K_e + c_e f_e f_e^T for every cell, with no (n, nd, nd) temporaries."""
+    for e in range(Ke.shape[0]):
+        for r in range(Ke.shape[1]):
+            cr = c[e] * fe[e, r]
+            for s in range(Ke.shape[2]):
+                data[pos[e, r, s]] += p[e] * Ke[e, r, s] + cr * fe[e, s]
+
+
+@njit(cache=True)
+def _scatter_patches(data, b, slots, members, c, pos):
+    """data += c_g b_g b_g^T for the node groups of one patch size (b_g = b[slots[g]])."""
+    for g in range(slots.shape[0]):
+        cg = c[members[g]]
+        for r in range(slots.shape[1]):
+            cr = cg * b[slots[g, r]]
+            for s in range(slots.shape[1]):
+                data[pos[g, r, s]] += cr * b[slots[g, s]]
 
 
 def law_needs_positive(function, params) -> bool:
