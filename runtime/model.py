@@ -480,9 +480,15 @@ class Model:
 
     def kernel_info(self) -> list:
         """Kernels loaded; `elements` is how many cells each models now (0: reachable by switching)."""
-        return [{"element": p.element, "law": p.law, "quadrature": p.quadrature,
+        info = [{"element": p.element, "law": p.law, "quadrature": p.quadrature,
                  "backend": p.kernel.backend, "outputs": list(self.outputs), "elements": p.n_active}
                 for p in self.parts]
+        for c in self.couplings:           # a formulation's volume measure: the cells it covers
+            p = self.parts[c.part_index]
+            info.append({"element": p.element, "law": c.measure, "quadrature": p.quadrature,
+                         "backend": c.kernel.backend, "outputs": list(self.outputs), "elements": len(c.rows),
+                         "formulation": c.formulation, "of_law": c.law})
+        return info
 
     def law_names(self) -> list:
         """Sorted names of the laws the parts carry: what a `law_id` indexes."""
