@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 import tensormass as tm
+from tensormass import laws
 from tensormass.generator.catalogue import catalogue
+from tensormass.generator.ir import law_degree
 
 from helpers import random_elements, relative_error
 
@@ -89,5 +91,5 @@ def test_fused_scatter_c_equals_numba(entry):
         kernel.forces_and_stiffness_scatter(D, U, cells, pos, f, data)
         results.append((f, data))
     (fn, dn), (fc, dc) = results
-    assert np.abs(dn).max() > 0
+    assert np.abs(dn).max() > 0 or law_degree(laws.kernel_law(entry.law)) == 1   # a linear measure: K = 0
     assert relative_error(fc, fn) < 1e-12 and relative_error(dc, dn) < 1e-12
