@@ -137,8 +137,10 @@ class Simulation:
                     self.files.abandon()
                 raise
             self._setup = time.perf_counter() - start
-        # runtime.advice: what the scene's choices cost in accuracy (a Model alone: none)
+        # runtime.advice: what the scene's choices cost in accuracy (a Model alone: none); setup time
+        advised = time.perf_counter()
         self.advice = [] if self.model.scene is None else _advice.scene_advice(self.model.scene, self.model.mesh)
+        self._setup += time.perf_counter() - advised
         self.progress, self.writer, self.on_step = progress, writer, on_step
         threads = getattr(self.model.solver, "threads", None)
         if threads is not None:                  # [solver] threads (or run --threads): the one switch
