@@ -25,7 +25,7 @@ from ..runtime.errors import RunInterrupted, RunStopped, TensormassError
 from ..runtime.scene import Scene, picture_field
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
-           "DEMO_OUT"]
+           "DEMO_OUT", "print_advice"]
 
 DEMO_OUT = "tensormass-demo"
 
@@ -108,12 +108,23 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     files.prepare()
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
+    if not quiet:
+        print_advice(scene, stream)
     data, stopped = _simulate(Simulation, scene, files, progress)
     if not quiet:
         print_summary(data, stream=stream, json_path=files.json_path)
     if stopped is not None:
         print(f"tensormass: run {data['status']}: {data['message']}", file=sys.stderr)
     return data
+
+
+def print_advice(scene, stream=None) -> list:
+    """The scene's setup-time advice (runtime.advice), one "advice:" line each, before the run; the lines."""
+    from ..runtime.advice import scene_advice
+    lines = scene_advice(scene, scene.load_mesh())
+    for line in lines:
+        print(f"advice: {line}", file=stream if stream is not None else sys.stdout)
+    return lines
 
 
 def _simulate(Simulation, scene, files, progress):

@@ -31,6 +31,7 @@ Schema (every table but [mesh] and [[material]] is optional)::
     E = 1.0e8                               # with nu; or the law's native parameters (mu, lam, ...)
     nu = 0.3
     density = 800.0
+    formulation = "displacement"            # or mean_dilatation | nodal_pressure (runtime.formulations; per element)
     [[fixed]]
     box = [[...], [...]]                    # nodes inside: clamped, or
     region = "attached"                     # instead of / with box: the nodes of a mesh group (name or id)
@@ -94,6 +95,7 @@ from .regions import (assign_materials as _assign_materials, box_contains, box_t
                       reachable_laws, switch_applies, switch_parameters)
 from .scene_mesh import PROBE_TOLERANCE, catalogue_check as _catalogue_check, check_against_mesh
 from .scene_mesh import load_mesh as _load_mesh
+from . import scene_formulation as _formulation
 
 # Names that lived here before runtime.regions and runtime.scene_mesh (kept for importers).
 __all__ = ["Scene", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "PressureLoad", "Loads", "Solver", "Probe",
@@ -513,6 +515,7 @@ class _Parser:
             raise SceneError(f"probe[{names.index(dup, names.index(dup) + 1)}].name: duplicate probe name {dup!r}")
         output = self.output(self.table(data.get("output", {}), "output"))
         adapt = [self.adapt(t, f"adapt[{i}]") for i, t in enumerate(self.tables(data.get("adapt", []), "adapt"))]
+        _formulation.check_adapt(materials, adapt)
         name = self.string(data.get("name", "scene"), "name")
         description = self.string(data.get("description", ""), "description")
         if solver.kind == "static" and not fixed:
@@ -594,6 +597,9 @@ class _Parser:
         box = self.box(t["box"], f"{key}.box") if "box" in t else None
         quadrature = self.string(t.get("quadrature", "gauss2"), f"{key}.quadrature")
         self._check_combination(key, region, law_name, quadrature)
+        formulation = _formulation.formulation_name(t.get("formulation", "displacement"), f"{key}.formulation")
+        if isinstance(region, str) and region in CELL_TYPES:    # validate() repeats it per cell type of the mesh
+            _formulation.check_element(f"{key}.formulation", formulation, region)
         density = self.number(t.get("density", 1000.0), f"{key}.density")
         if density <= 0:
             raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
@@ -618,8 +624,7 @@ class _Parser:
             E = self.number(t["E"], f"{key}.E")
             nu = self.number(t["nu"], f"{key}.nu")
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
-                       params=native, density=density,
-                       formulation=self.string(t.get("formulation", "displacement"), f"{key}.formulation"))
+                       params=native, density=density, formulation=formulation)
         try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:

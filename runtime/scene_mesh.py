@@ -22,6 +22,7 @@ from . import mesh as _mesh          # module attribute lookups: tests stand in 
 from .mesh import MeshError, check_coordinates
 from .probes import PROBE_CELL_FRACTION, ProbeError, locate_point
 from .refine import REFINABLE_TYPES
+from .scene_formulation import check_element as check_formulation_element
 from .regions import (assign_materials, box_contains, box_tolerance, check_unused_materials, prescribed_values,
                       reachable_laws, region_faces, selection_nodes, switch_parameters)
 
@@ -182,6 +183,8 @@ def check_against_mesh(scene, mesh) -> None:
         for i in np.unique(w):
             m = scene.materials[int(i)]
             catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
+            check_formulation_element(f"material[{int(i)}].formulation",
+                                      getattr(m, "formulation", "displacement"), blk.type)
         offset += len(blk)
     check_unused_materials(scene.materials, mesh, which)
     _check_adapt(scene, mesh, which)

@@ -20,7 +20,9 @@ from . import parallel as _parallel
 from .adapt import MAX_STATIC_PASSES, Adapter
 from .errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, RunStopped,
                      TensormassError)
+from . import advice as _advice
 from . import fields as _fields
+from . import hourglass as _hourglass
 from .health import HealthMonitor
 from .history import History, units as _units
 from .integrators import Context, Explicit, make_integrator, stable_time_step
@@ -71,6 +73,7 @@ class Summary:
     reactions: dict = field(default_factory=dict)      # final reaction force/moment/point per [[fixed]] entry
     fields: dict | None = None            # output fields of the frames: names, units, law_ids (runtime.fields)
     units: dict = field(default_factory=dict)      # unit of every per_step key (runtime.history.units)
+    advice: list = field(default_factory=list)     # setup-time advice (runtime.advice); never changes status
 
     @property
     def exit_code(self) -> int:
@@ -134,6 +137,10 @@ class Simulation:
                     self.files.abandon()
                 raise
             self._setup = time.perf_counter() - start
+        # runtime.advice: what the scene's choices cost in accuracy (a Model alone: none); setup time
+        advised = time.perf_counter()
+        self.advice = [] if self.model.scene is None else _advice.scene_advice(self.model.scene, self.model.mesh)
+        self._setup += time.perf_counter() - advised
         self.progress, self.writer, self.on_step = progress, writer, on_step
         threads = getattr(self.model.solver, "threads", None)
         if threads is not None:                  # [solver] threads (or run --threads): the one switch
@@ -215,6 +222,7 @@ class Simulation:
             self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
         self.monitor = HealthMonitor(ctx, dynamic=model.solver.kind != "static",
                                      duration=getattr(self.integrator, "duration", None))
+        _hourglass.check_static(ctx)          # refused: a static stiffness made singular by hourglass modes
         # the frames' fields can be computed (kernels with stress(), providers): refused before step 1
         _fields.check_available(model, self._frame_fields(), self._field_providers())
         ctx.asm.time = ctx.linear.time = 0.0         # stepping costs only from here on
@@ -449,7 +457,7 @@ class Simulation:
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
             fields=self._fields_summary(), reactions=self._final_reactions(),
-            units=_units(model.dim, model.solver.kind == "static"))
+            units=_units(model.dim, model.solver.kind == "static"), advice=list(getattr(self, "advice", [])))
 
     def _final_reactions(self) -> dict:
         """{name: {"force", "moment", "point"}} at the last state (lists), {} before any step."""

@@ -203,7 +203,7 @@ cells = [2, 1, 1]
 element = "hexahedron"
 [[material]]
 law = "hooke"
-quadrature = "gauss1"
+quadrature = "gauss2"
 E = 1e6
 nu = 0.3
 density = 100.0
