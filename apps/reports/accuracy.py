@@ -76,7 +76,7 @@ from .file_levels import FileLevels
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
-COLUMNS = ["benchmark", "element", "law", "quadrature", "cells", "case", "dofs", "value", "error_analytic",
+COLUMNS = ["benchmark", "element", "law", "quadrature", "formulation", "cells", "case", "dofs", "value", "error_analytic",
            "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
 
 # -- the built-in benchmark (SIZE, E_MOD, NU, RHO, G: common.py) --------------------------------------
@@ -336,7 +336,9 @@ def _csv_bytes(rows) -> bytes:
 def _series(rows) -> dict:
     out = {}
     for i, r in enumerate(rows):
-        out.setdefault(f"{r['element']} / {r['law']} / {r['quadrature']}", []).append(i)
+        form = r.get("formulation", "displacement")
+        label = f"{r['element']} / {r['law']} / {r['quadrature']}" + ("" if form == "displacement" else f" / {form}")
+        out.setdefault(label, []).append(i)
     return out
 
 

@@ -50,6 +50,7 @@ def result_row(element, law, quadrature, cells, summary, peak, value, benchmark=
     """One row of results.csv (accuracy.COLUMNS, plus main=True)."""
     t = summary.time
     return {"benchmark": benchmark, "element": element, "law": law, "quadrature": quadrature,
+            "formulation": "displacement",
             "cells": cells_label(cells), "case": case, "main": True,
             "dofs": int(summary.n_free_dofs),
             "value": float(value), "error_analytic": float("nan"),
