@@ -1,7 +1,8 @@
 """`tensormass report accuracy|stability`: what a setting costs and whether it survives.
 
 accuracy   sweeps element x law x quadrature x resolution over benchmarks with known answers
-           (cantilever, beam2d, volume, mixed, large_deflection, shear, torsion) or a user scene, and writes
+           (cantilever, beam2d, volume, mixed, large_deflection, shear, torsion, adaptive_beam,
+           refinement, cook, block) or a user scene, and writes
            results.csv, error_vs_time.png (Pareto front), convergence.png, report.md
 stability  runs the stiff and extreme cases of the brief and writes a table and report.md
 """

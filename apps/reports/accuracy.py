@@ -9,8 +9,11 @@ thesis' FEM numbers), mixed (the 8 x 1 x 1 m mixed-element bar against hexahedra
 large_deflection (soft cantilever: hooke vs stvk vs neohookean vs stable_neohookean), shear and
 torsion (the thesis' ch. 7 5 m cube: reaction force / torque on the top face against the thesis'
 formulas and the finest tetra10 run), adaptive_beam (hooke / stvk / adaptive hooke->stvk on a large-
-rotation cantilever) and refinement (R_S refinement against uniform refinement; see adaptive.py).
-results.csv starts with a `benchmark` column and has a `case` column (volume: nu and compression);
+rotation cantilever), refinement (R_S refinement against uniform refinement; see adaptive.py), cook
+(Cook's membrane: locking of 2D elements and the locking-free formulations; cook.py) and block (a
+nearly incompressible cube of tetrahedra; block.py).
+results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
+`case` column (volume: nu and compression);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
 benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
 
@@ -71,6 +74,7 @@ from ...runtime.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
+from .block import block
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
 
@@ -333,12 +337,16 @@ def _csv_bytes(rows) -> bytes:
     return buf.getvalue().encode("utf-8")
 
 
+def _combo(r) -> str:
+    """element / law / quadrature (/ formulation, when not the displacement one) of a row."""
+    form = r.get("formulation", "displacement")
+    return f"{r['element']} / {r['law']} / {r['quadrature']}" + ("" if form == "displacement" else f" / {form}")
+
+
 def _series(rows) -> dict:
     out = {}
     for i, r in enumerate(rows):
-        form = r.get("formulation", "displacement")
-        label = f"{r['element']} / {r['law']} / {r['quadrature']}" + ("" if form == "displacement" else f" / {form}")
-        out.setdefault(label, []).append(i)
+        out.setdefault(_combo(r), []).append(i)
     return out
 
 
@@ -417,7 +425,7 @@ def _section(bench, rows, idx, front, reference, notes) -> list:
               "the numerical reference:", ""]
     for i in front:
         r = rows[i]
-        lines.append(f"- {r['element']} / {r['law']} / {r['quadrature']}, cells {r['cells']} "
+        lines.append(f"- {_combo(r)}, cells {r['cells']} "
                      f"({r['dofs']} dofs): error {_fmt(r['error_reference'])} in {r['time_total']:.3g} s")
     if not front:
         lines.append("- (none: no finite errors against a numerical reference)")
@@ -474,7 +482,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement", "cook")
+                   "adaptive_beam", "refinement", "cook", "block")
 
 
 def _resolve(benchmarks) -> list:
@@ -504,7 +512,7 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook}
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -544,7 +552,7 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
         progress(f"Pareto front of {bench} (total time vs error against the numerical reference):")
         for i in front:
             r = rows[i]
-            progress(f"  {r['element']} / {r['law']} / {r['quadrature']} cells {r['cells']}: "
+            progress(f"  {_combo(r)} cells {r['cells']}: "
                      f"error {_fmt(r['error_reference'])}, {r['time_total']:.3g} s")
     progress(f"wrote {out / 'results.csv'}, error_vs_time.png, convergence.png, report.md ({elapsed:.1f} s)")
     return rows
