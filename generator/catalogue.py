@@ -49,10 +49,9 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
 
 def measure_entries() -> list[Entry]:
     """The volume-measure kernels of the locking-free formulations (runtime.formulations): every
-    measure, on the elements some formulation supports, at every quadrature."""
-    from ..runtime.formulations import FORMULATIONS
-    supported = sorted({e for allowed in FORMULATIONS.values() if allowed for e in allowed} & set(ELEMENTS))
-    return entries(supported, laws.measure_names())
+    measure on every element at every quadrature (the generator does not read the runtime's table
+    of which formulation applies where)."""
+    return entries(None, laws.measure_names())
 
 
 def catalogue() -> list[Entry]:
