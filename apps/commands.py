@@ -108,9 +108,8 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     files.prepare()
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
-    if not quiet:
-        print_advice(scene, stream)
-    data, stopped = _simulate(Simulation, scene, files, progress)
+    advise = None if quiet else (lambda sim: print_advice(getattr(sim, "advice", ()), stream))
+    data, stopped = _simulate(Simulation, scene, files, progress, advise)
     if not quiet:
         print_summary(data, stream=stream, json_path=files.json_path)
     if stopped is not None:
@@ -118,16 +117,15 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     return data
 
 
-def print_advice(scene, stream=None) -> list:
-    """The scene's setup-time advice (runtime.advice), one "advice:" line each, before the run; the lines."""
-    from ..runtime.advice import scene_advice
-    lines = scene_advice(scene, scene.load_mesh())
+def print_advice(lines, stream=None) -> list:
+    """Setup-time advice lines (runtime.advice, as Simulation.advice holds them), one "advice:" line
+    each, before the run; returns the lines."""
     for line in lines:
         print(f"advice: {line}", file=stream if stream is not None else sys.stdout)
-    return lines
+    return list(lines)
 
 
-def _simulate(Simulation, scene, files, progress):
+def _simulate(Simulation, scene, files, progress, advise=None):
     """(summary dict, None) for a run we stand behind, (summary dict, RunStopped) otherwise.
 
     The command line hands the Simulation the frames' writer and writes the summary itself with
@@ -136,6 +134,8 @@ def _simulate(Simulation, scene, files, progress):
     sim = None
     try:
         sim = Simulation(scene, progress=progress, writer=files.writer)
+        if advise is not None:               # the advice the Simulation computed, before its first step
+            advise(sim)
         summary, stopped = sim.run(), None
     except RunStopped as exc:
         summary, stopped = exc.summary, exc
