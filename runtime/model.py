@@ -36,7 +36,8 @@ from .probes import PointProbe, locate_point
 from .regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
                       prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from .scene import Loads, Output, Solver
-from .volumetric import VolumetricCoupling, check_formulation, volumetric_functions
+from .scene_formulation import check_element as _check_formulation_element, formulation_name
+from .volumetric import VolumetricCoupling, volumetric_functions
 from .scene_mesh import build_mesh, scene_mesh
 
 # outputs_for (runtime.integrators), build_mesh and scene_mesh (runtime.scene_mesh) are kept
@@ -123,12 +124,11 @@ class _Formulated:
     rows: np.ndarray             # part-local cell indices
     materials: np.ndarray        # material index of each of those cells
     law: str
-    part: int = -1
-    full_params: dict | None = None
+    part: int = -1               # its part's index in Model.parts
+    full_params: dict | None = None   # the law's parameters per cell of the part (U needs the bulk one)
 
-    def deviatoric(self, part: int, params: dict) -> dict:
-        """The part's parameters with the bulk one set to 0 on these cells (W_dev); keeps the full ones."""
-        self.part, self.full_params = part, params
+    def deviatoric(self, params: dict) -> dict:
+        """The part's parameters with the bulk one set to 0 on these cells: the kernel then integrates W_dev."""
         bulk = volumetric_functions(self.law)[0]
         out = dict(params)
         out[bulk] = np.array(params[bulk], dtype=float, copy=True)
@@ -269,7 +269,8 @@ class Model:
                 self._check_kernel_dofs(kernel, element, cells)
                 params = self._parameters(name, members)
                 if formulated is not None:
-                    params = formulated.deviatoric(len(parts), params)
+                    formulated.part, formulated.full_params = len(parts), params
+                    params = formulated.deviatoric(params)
                 D = self._constants(kernel, cells, cell_ids, params)
                 volume = kernel.point_volumes(D).sum(axis=1)       # the layout from the kernel's metadata
                 active = np.full(len(cells), k == 0)
@@ -285,9 +286,10 @@ class Model:
         """The cells of this part a locking-free formulation models (runtime.volumetric), or None."""
         rows, start, names, mats = [], 0, set(), []
         for _, ids, m in members:
-            name = getattr(self.materials[m], "formulation", "displacement") or "displacement"
+            key = f"material[{m}].formulation"
+            name = formulation_name(getattr(self.materials[m], "formulation", "displacement"), key)
             if name != "displacement":
-                check_formulation(name, element)
+                _check_formulation_element(key, name, element)      # the scene's check, for Models built directly
                 rows.append(np.arange(start, start + len(ids)))
                 mats.append(np.full(len(ids), m))
                 names.add(name)
@@ -472,6 +474,10 @@ class Model:
             D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dofs_per_node))
             for name in outputs or self.outputs:
                 getattr(part.kernel, name)(D, u)
+        for c in self.couplings:                  # the formulations' measure kernels (energy: every call)
+            D, u = c.D[:1], np.zeros((1, c.kernel.n_nodes, self.dofs_per_node))
+            for name in sorted({"energy", *(outputs or self.outputs)}):
+                getattr(c.kernel, name)(D, u)
 
     @property
     def n_elements(self) -> int:

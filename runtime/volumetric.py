@@ -18,7 +18,8 @@ Pi is an energy, so forces and the (symmetric) Jacobian follow exactly:
 
 The rank-one terms couple the cells of one group: inside one cell for mean dilatation; for nodal
 pressure the nodes of the cells around a node, so the Assembler adds those patches to the sparsity
-pattern (`pattern_tables`).  The pressure of a group is U'(J_g) (runtime.fields reads it).
+pattern (`patch_tables`).  The pressure of a group is U'(J_g); runtime.fields adds p_e dtheta/dF to
+the stress (`cell_terms`).
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from .. import laws
-from .errors import InvertedElementError, TensormassError
+from .errors import InvertedElementError
 
 __all__ = ["VolumetricCoupling", "volumetric_functions"]
 
@@ -40,7 +41,6 @@ def volumetric_functions(law_name: str):
 
     From the committed generated/volumetric.py while the law file is unchanged; a new or edited
     law is split now (sympy) and the same expressions are compiled in memory."""
-    from .. import generated
     from ..generator.volumetric import law_source_hash
     law = laws.get(law_name)
     try:
@@ -50,7 +50,6 @@ def volumetric_functions(law_name: str):
     if table is not None and law_name in table.SPLITS and table.SPLITS[law_name][2] == law_source_hash(law):
         parameter, measure, _ = table.SPLITS[law_name]
         return parameter, measure, table.FUNCTIONS[law_name]
-    del generated
     return _derived(law_name)
 
 
@@ -89,7 +88,6 @@ class VolumetricCoupling:
         self.ST = self.S.T.tocsr()
         self.positions = None              # (n, nd, nd) CSR positions of the cells; set by the Assembler
         self.patch_positions = []          # per patch table (nodal pressure); set by the Assembler
-        self.pressure = np.zeros(self.S.shape[0])
         self.needs_positive = law_needs_positive(self.function, self.params)
 
     # -- groups ----------------------------------------------------------------------------------
@@ -155,7 +153,6 @@ class VolumetricCoupling:
                                        f"{self.law!r} is undefined", self.cell_ids[bad])
         with np.errstate(all="ignore"):
             Ug, dU, d2U = (np.broadcast_to(np.asarray(x, dtype=float), J.shape) for x in self.function(J, **self.params))
-        self.pressure = np.array(dU)
         p = self.ST @ dU
         if f is not None:
             _scatter_vector(f, np.ascontiguousarray(p[:, None] * fe), self.dofs)
@@ -220,12 +217,3 @@ def law_needs_positive(function, params) -> bool:
     with np.errstate(all="ignore"):
         values = function(np.array([-1.0]), **{p: v[:1] if np.ndim(v) else v for p, v in params.items()})
     return not all(np.all(np.isfinite(np.asarray(x, dtype=float))) for x in values)
-
-
-def check_formulation(formulation: str, element: str) -> None:
-    from .formulations import FORMULATIONS, supports
-    if formulation not in FORMULATIONS:
-        raise TensormassError(f"unknown formulation {formulation!r}; known: {', '.join(FORMULATIONS)}")
-    if not supports(formulation, element):
-        raise TensormassError(f"formulation {formulation!r} does not apply to {element} "
-                              f"(it supports {', '.join(FORMULATIONS[formulation])})")

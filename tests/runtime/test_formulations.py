@@ -165,9 +165,9 @@ def test_generated_functions_match_the_split():
 
 def test_unknown_or_unsupported_formulation_is_refused():
     mesh, _ = _mesh("tetra")
-    with pytest.raises(tm.TensormassError, match="mean_dilatation.*tetra"):
+    with pytest.raises(tm.TensormassError, match=r"material\[0\]\.formulation: tetra: mean_dilatation does not apply"):
         Model(mesh, [Material(law="neohookean", E=1.0, nu=0.45, formulation="mean_dilatation")])
-    with pytest.raises(tm.TensormassError, match="unknown formulation"):
+    with pytest.raises(tm.TensormassError, match=r"material\[0\]\.formulation: unknown formulation 'fbar2'"):
         Model(mesh, [Material(law="neohookean", E=1.0, nu=0.45, formulation="fbar2")])
 
 
