@@ -33,7 +33,7 @@ import numpy as np
 from .. import generated, laws
 from ..backends import BACKENDS
 from ..generator import GENERATOR_VERSION
-from ..generator.catalogue import entries, measure_entries
+from ..generator.catalogue import catalogue_laws, entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
 from ..generator import shape_tables, volumetric
@@ -73,12 +73,10 @@ def cmd_list(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    elements, quadratures = _names(args.element, ELEMENTS, "element"), _names(args.quadrature, None, "quadrature")
-    law_names = _names(args.law, laws.names() + laws.measure_names(), "law")
-    selected = entries(elements, law_names, quadratures)
-    if law_names is None:                  # the whole catalogue: the formulations' measure kernels too
-        selected = sorted(selected + [e for e in measure_entries() if (elements is None or e.element in elements)
-                                      and (quadratures is None or e.quadrature in quadratures)])
+    # no --law: the whole catalogue, the formulations' volume-measure kernels too
+    selected = entries(_names(args.element, ELEMENTS, "element"),
+                       _names(args.law, catalogue_laws(), "law") or catalogue_laws(),
+                       _names(args.quadrature, None, "quadrature"))
     backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
     unknown = sorted(set(backends) - set(BACKENDS))
     if unknown:
@@ -171,7 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("generate", help="generate element x law x quadrature kernels")
     p.add_argument("--element", nargs="+", help=f"element(s) or all: {', '.join(ELEMENTS)}")
-    p.add_argument("--law", nargs="+", help=f"law(s) or all: {', '.join(laws.names())}")
+    p.add_argument("--law", nargs="+", help=f"law(s), volume measure(s) or all (the default): {', '.join(catalogue_laws())}")
     p.add_argument("--quadrature", nargs="+", help="quadrature(s) or all: gauss1 gauss2 gauss3 exact")
     p.add_argument("--backend", nargs="+", help=f"backend(s) or all: {', '.join(BACKENDS)}")
     p.add_argument("--out", default="tensormass-kernels", help="output folder (default: ./tensormass-kernels)")

@@ -32,7 +32,7 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
     """Catalogue entries, sorted, filtered by the given names (None = every element and every
     material law; volume measures only when named). Unknown names raise."""
     elements = _check("element", elements, sorted(ELEMENTS))
-    law_names = laws.names() if law_names is None else _check("law", law_names, laws.names() + laws.measure_names())
+    law_names = laws.names() if law_names is None else _check("law", law_names, catalogue_laws())
     found = []
     for e in elements:
         for law in law_names:
@@ -47,21 +47,20 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
     return sorted(found)
 
 
-def measure_entries() -> list[Entry]:
-    """The volume-measure kernels of the locking-free formulations (runtime.formulations): every
-    measure on every element at every quadrature (the generator does not read the runtime's table
-    of which formulation applies where)."""
-    return entries(None, laws.measure_names())
+def catalogue_laws() -> list[str]:
+    """Every law and volume measure: what generated/ holds kernels of (the measures on every element:
+    the generator does not read the runtime's table of which formulation applies where)."""
+    return laws.names() + laws.measure_names()
 
 
 def catalogue() -> list[Entry]:
-    """What generated/ holds: every material law's entries and the measure kernels."""
-    return sorted(entries() + measure_entries())
+    """What generated/ holds: every material law's entries and the volume measures' (laws/measures.py)."""
+    return entries(None, catalogue_laws())
 
 
 def _check(kind, given, known):
     if given is None:
-        return known[:]
+        return known
     unknown = [g for g in given if g not in known]
     if unknown:
         raise ValueError(f"unknown {kind} {', '.join(unknown)}; known: {', '.join(known)}")

@@ -177,14 +177,7 @@ class FieldEvaluator:
                 except ElementError as exc:           # global cell ids, not the part-local ones
                     message = str(exc).rsplit(": element(s)", 1)[0]
                     raise type(exc)(f"output fields: {message}", ids[exc.elements]) from None
-                shape = S.shape[:2]
-                F3 = np.zeros(shape + (3, 3))
-                P3 = np.zeros(shape + (3, 3))
-                F3[..., :d, :d] = S[..., layout["F"]:layout["F"] + d * d].reshape(shape + (d, d))
-                P3[..., :d, :d] = S[..., layout["P"]:layout["P"] + d * d].reshape(shape + (d, d))
-                if d == 2:                       # plane strain: F33 = 1, sigma33 from P33
-                    F3[..., 2, 2] = 1.0
-                    P3[..., 2, 2] = S[..., layout["P33"]]
+                F3, P3 = _tensor(S, layout, "F", d, 1.0), _tensor(S, layout, "P", d)
                 W = S[..., layout["W"]]
                 if coupling is not None:
                     self._add_volumetric(coupling, row_of[start:start + len(ids)], pressure, density, U, W, P3)
@@ -197,13 +190,9 @@ class FieldEvaluator:
         if not mine.size:
             return
         r = rows[mine]
-        Sm = coupling.kernel.stress(coupling.D[r], np.ascontiguousarray(U[coupling.cells[r]]))
-        layout, d = coupling.kernel.stress_record["offsets"], coupling.kernel.dim
-        Pm = np.zeros(Sm.shape[:2] + (3, 3))
-        Pm[..., :d, :d] = Sm[..., layout["P"]:layout["P"] + d * d].reshape(Sm.shape[:2] + (d, d))
-        if d == 2:
-            Pm[..., 2, 2] = Sm[..., layout["P33"]]
-        P3[mine] += pressure[r][:, None, None, None] * Pm
+        k = coupling.kernel
+        Sm = k.stress(coupling.D[r], np.ascontiguousarray(U[coupling.cells[r]]))
+        P3[mine] += pressure[r][:, None, None, None] * _tensor(Sm, k.stress_record["offsets"], "P", k.dim)
         W[mine] += density[r][:, None]
 
     def _ids_of(self, name: str) -> np.ndarray:
@@ -284,6 +273,17 @@ class FieldEvaluator:
         used = weight > 0
         total[used] /= weight[used, None]
         return total.reshape((n,) + x.shape[1:])         # nodes no cell holds: 0
+
+
+def _tensor(S, layout, name: str, d: int, out_of_plane: float | None = None) -> np.ndarray:
+    """The 3x3 tensor `name` (F or P) of stress records S (n, q, size): 2D records are plane strain,
+    their 33 entry is `out_of_plane` (F33 = 1) or, for P, the record's P33."""
+    shape = S.shape[:2]
+    T = np.zeros(shape + (3, 3))
+    T[..., :d, :d] = S[..., layout[name]:layout[name] + d * d].reshape(shape + (d, d))
+    if d == 2:
+        T[..., 2, 2] = out_of_plane if out_of_plane is not None else S[..., layout["P33"]]
+    return T
 
 
 def _derive(names, W, F, P) -> dict:
