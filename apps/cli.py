@@ -6,6 +6,7 @@
     tensormass run SCENE.toml [--json SUMMARY]    simulate a scene
     tensormass demo                               the embedded default scene (a mixed bar under gravity)
     tensormass bench kernels|compile|steps        kernel throughput against a classic loop; compile budget; steps
+    tensormass bench organ|history|formulations   gmsh organs and solvers; history cost; formulations' cost
     tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
     tensormass plot SUMMARY.json [-o PNG]         history curves of a run (probes, energies, reactions, solver)
 
