@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 from .. import laws
 from .elements import ELEMENTS
+from .discrete import QUADRATURE as DISCRETE
 from .ir import EXACT, exact_degree
 from .quadrature import GAUSS_RULES
 
@@ -21,7 +22,11 @@ class Entry:
 
 
 def quadratures(element: str, law: str) -> list[str]:
-    """gauss1..3 everywhere; 'exact' where the integrand is a polynomial (Hooke, StVK on simplices)."""
+    """gauss1..3 everywhere; 'exact' where the integrand is a polynomial (Hooke, StVK on simplices);
+    a discrete law (springs): 'discrete' on the elements it is defined on, nothing elsewhere."""
+    the_law = laws.kernel_law(law)
+    if the_law.kind == "discrete":
+        return [DISCRETE] if element in the_law.elements else []
     names = list(GAUSS_RULES)
     if exact_degree(element, laws.kernel_law(law)) is not None:
         names.append(EXACT)

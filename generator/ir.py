@@ -121,9 +121,14 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     """
     if constants not in CONSTANTS_MODES:
         raise ValueError(f"unknown constants mode {constants!r}; use one of {', '.join(CONSTANTS_MODES)}")
+    law = laws_pkg.kernel_law(law_name)
+    if law.kind == "discrete":                  # an element energy in nodal positions: generator/discrete.py
+        from .discrete import QUADRATURE, build_discrete_ir
+        if quadrature != QUADRATURE:
+            raise ValueError(f"law {law_name!r} is discrete: its kernels have quadrature {QUADRATURE!r}, not {quadrature!r}")
+        return build_discrete_ir(element_name, law_name, max_ops, constants)
     recompute = constants == "recompute"
     ref = get_element(element_name)
-    law = laws_pkg.kernel_law(law_name)
     rule = resolve_rule(element_name, law, quadrature)
     dim, n = ref.dim, ref.n_nodes
     deriv = law_derivatives(law, dim)

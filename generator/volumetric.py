@@ -107,7 +107,7 @@ import numpy
 def module_text(law_names=None) -> str:
     """The source of generated/volumetric.py for the given laws (default: every law)."""
     printer = NumPyPrinter({"fully_qualified_modules": True, "allow_unknown_functions": False})
-    names = sorted(law_names if law_names is not None else laws_pkg.names())
+    names = sorted(law_names if law_names is not None else laws_pkg.continuum_names())
     lines, table = [_HEADER], []
     for name in names:
         s = split(name)

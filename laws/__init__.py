@@ -4,6 +4,9 @@ A law file defines ``LAW = Law(...)``: the strain-energy density W(F) per unit
 rest volume written with sympy, its native parameters and how they follow from
 Young's modulus E and Poisson's ratio nu. Adding a law means adding one file to
 this folder; nothing else has to change.
+
+A discrete law (``LAW = DiscreteLaw(...)``: mss.py, hybmss.py) writes instead the energy of one
+element in its nodal positions (springs, lattice cubes; springs.py has the pieces).
 """
 from __future__ import annotations
 
@@ -11,9 +14,10 @@ import importlib
 import pkgutil
 from functools import lru_cache
 
-from .base import Law, LawError, lame_from_E_nu
+from .base import DiscreteLaw, Law, LawError, lame_from_E_nu
 
-__all__ = ["Law", "LawError", "lame_from_E_nu", "get", "names", "is_quadratic", "measure_names", "kernel_law"]
+__all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names",
+           "is_discrete", "is_quadratic", "measure_names", "kernel_law"]
 
 
 @lru_cache(maxsize=None)
@@ -32,6 +36,21 @@ def _registry() -> dict[str, Law]:
 def names() -> list[str]:
     """Names of every known law, sorted."""
     return list(_registry())
+
+
+def continuum_names() -> list[str]:
+    """The laws with an energy density W(F) (the finite elements' materials), sorted."""
+    return [n for n, law in _registry().items() if law.kind == "continuum"]
+
+
+def discrete_names() -> list[str]:
+    """The discrete laws (springs, lattice cubes: an element energy in nodal positions), sorted."""
+    return [n for n, law in _registry().items() if law.kind == "discrete"]
+
+
+def is_discrete(name: str) -> bool:
+    """True for a discrete law (mss, hybmss): no W(F), no formulations, quadrature "discrete"."""
+    return name in discrete_names()
 
 
 def measure_names() -> list[str]:
@@ -66,6 +85,8 @@ def is_quadratic(name: str) -> bool:
     """
     import sympy as sp
     law = get(name)
+    if law.kind != "continuum":
+        return False
     H = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"H{i}{j}", real=True))
     W = law.energy(sp.eye(3) + H, **law.symbols())
     entries = list(H)

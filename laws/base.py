@@ -30,6 +30,7 @@ class Law:
     validity: str
     # Laws with ln J or J^(-2/3) are undefined for det F <= 0: kernels flag those elements.
     requires_positive_J: bool = False
+    kind = "continuum"               # an energy density W(F); DiscreteLaw: an element energy in nodal positions
 
     def symbols(self) -> dict[str, sp.Symbol]:
         return {p: sp.Symbol(p, real=True) for p in self.parameters}
@@ -76,3 +77,57 @@ def lame_from_E_nu(E, nu) -> tuple:
     lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
     mu = E / (2.0 * (1.0 + nu))
     return lam, mu
+
+
+def _no_density(*args, **kwargs):
+    raise LawError("a discrete law has no energy density W(F): its energy is a function of the nodal "
+                   "positions (DiscreteLaw.element_energy)")
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteLaw(Law):
+    """An energy of one element written directly in its nodal positions: springs, lattice cubes.
+
+    The second kind of energy source of the generator (generator/discrete.py) beside W(F):
+      element_energy(element, x, X, **params) -> sympy expression: the element's energy (J) with
+          x, X the (n_nodes, dim) sympy matrices of current and rest positions and the parameter
+          symbols; it must be invariant under translations (the kernels store rest positions
+          relative to the first node) and rotations (tests check both).
+      rest_measure(element, X) -> the element's rest volume (area in 2D): stored as the "point
+          volume" the runtime reads (summary, fields: energy density = energy / measure).
+      rest_checks(element, X) -> [(left, right, flag, message)]: the constants kernel flags an
+          element with `flag` where left > right (e.g. a lattice cube that is not a cube).
+    `parameters` are what the constants kernel receives (E, nu and options such as HybMSS's A,
+    all hoisted with the rest geometry into per-element stiffnesses); `options` gives their
+    defaults; `elements` the element types the law is defined on (one kernel each, quadrature
+    "discrete")."""
+    energy: Callable[..., sp.Expr] = _no_density
+    from_E_nu: Callable[..., dict] = None
+    description: str = ""
+    validity: str = ""
+    element_energy: Callable[..., sp.Expr] = None
+    rest_measure: Callable[..., sp.Expr] = None
+    rest_checks: Callable[..., list] = lambda element, X: []
+    elements: tuple = ()
+    options: tuple = ()              # ((name, default, (low, high)), ...): parameters beyond E and nu
+    kind = "discrete"
+
+    def native_parameters(self, E=None, nu=None, **options) -> dict[str, np.ndarray]:
+        """E and nu (validated) and the options (their defaults where not given)."""
+        known = {name: (default, bounds) for name, default, bounds in self.options}
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            takes = ", ".join(["E", "nu"] + list(known))
+            raise LawError(f"law {self.name!r} has no parameter {', '.join(unknown)}; it takes {takes}")
+        if E is None or nu is None:
+            raise LawError(f"law {self.name!r} needs E and nu"
+                           + (f" (and optionally {', '.join(known)})" if known else ""))
+        E, nu = validate_E_nu(E, nu)
+        out = {"E": E, "nu": nu}
+        for name, (default, (low, high)) in known.items():
+            value = np.asarray(options.get(name, default), dtype=float)
+            if not np.all(np.isfinite(value)) or np.any(value < low) or np.any(value > high):
+                raise LawError(f"law {self.name!r}: parameter {name} must be a number in [{low:g}, {high:g}], "
+                               f"got {options.get(name)!r}")
+            out[name] = value
+        return {p: out[p] for p in self.parameters}
