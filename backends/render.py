@@ -26,7 +26,8 @@ def metadata(ir, backend) -> dict:
     per point q, D[q * point_stride + point_fields[f]] starts field f (v: the weight x det J,
     G: the shape gradients, node-major, G[i][b] at + i * dim + b); the material
     constants start at material_offset. Recompute kernels store rest coordinates instead
-    (point_stride 0, no point fields). stress_record: the layout of the stress kernel's
+    (point_stride 0, no point fields); discrete kernels (springs) their rest measure v and the rest
+    positions relative to node 0 (no G). stress_record: the layout of the stress kernel's
     per-point record ({"size", "offsets": {v, W, F, P(, P33)}}, generator.kernel_body)."""
     return {
         "name": ir.name,
@@ -40,7 +41,7 @@ def metadata(ir, backend) -> dict:
         "n_dofs": ir.n_dofs,
         "dofs_per_node": ir.dofs_per_node,
         "point_stride": ir.point_stride,
-        "point_fields": {} if ir.recompute else {"v": 0, "G": 1},
+        "point_fields": ir.point_fields,
         "material_offset": ir.material_offset,
         "parameters": list(ir.parameters),
         "requires_positive_J": bool(ir.requires_positive_J),

@@ -62,7 +62,7 @@ def build_discrete_ir(element_name: str, law_name: str, max_ops: int = DEFAULT_M
         constant_names=tuple(names) + material_names, geometry=Fragment((), ()), geometry_G=(),
         dN_table=(tuple(tuple(0.0 for _ in range(dim)) for _ in range(n)),), weights=(1.0,),
         material=parts.material, law_code=parts.code, J=None, chain={}, rule_points=((0.0,) * dim,),
-        rule_weights=(1.0,), recompute=False, stress_record=stress_record(dim),
+        rule_weights=(1.0,), recompute=False, stress_record=stress_record(dim), source="discrete",
     )
     draft = SimpleNamespace(**fields, n_dofs=n * dim, dofs_per_node=dim, parts=parts)
     ops = {k: sum(f.ops for f in v) for k, v in parts.code.items()}

@@ -59,10 +59,19 @@ class KernelIR:
     input_hash: str              # hash of element, rule, law source, generator version
     bodies: dict                 # kind -> statement tree of one element (generator/kernel_body.py)
     stress_record: dict          # layout of the stress kernel's per-point record (kernel_body.stress_record)
+    source: str = "continuum"    # the energy: a law's W(F), or "discrete" (generator/discrete.py: nodal positions)
 
     @property
     def dofs_per_node(self) -> int:
         return self.dim
+
+    @property
+    def point_fields(self) -> dict:
+        """Where each point's fields start in its block of D: v (weight x det J; a discrete kernel's
+        rest measure) and G (shape gradients: not for recompute or discrete kernels)."""
+        if self.recompute:
+            return {}
+        return {"v": 0} if self.source == "discrete" else {"v": 0, "G": 1}
 
     @property
     def n_dofs(self) -> int:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import laws
 from .formulations import DEFAULT_FORMULATION, LINEAR_ELEMENTS, locking_free_choice
 from .hourglass import hourglass_message, spurious_modes
 from .regions import assign_materials
@@ -73,6 +74,8 @@ def scene_advice(scene, mesh=None) -> list:
     advice = []
     for i, element_types in sorted(_modelled_elements(scene, mesh).items()):
         material, key = scene.materials[i], f"material[{i}]"
+        if laws.is_discrete(material.law):
+            continue        # springs: no locking, no quadrature; a singular lattice is refused by the solve check
         for element in element_types:
             text = _locking(key, material, element)
             if text is not None:

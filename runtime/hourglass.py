@@ -85,7 +85,11 @@ def check_static(ctx) -> None:
     K = ctx.asm.matrix(ctx.asm.stiffness(np.zeros(model.n_dofs)))[free][:, free].tocsc()
     if _unique(K):
         return
-    which = "; ".join(hourglass_message(e, q, n) for (e, q), n in deficient.items())
+    which = "; ".join(hourglass_message(e, q, n) for (e, q), n in deficient.items() if q != "discrete")
+    if any(q == "discrete" for _, q in deficient):
+        lattice = ", ".join(sorted({e for e, q in deficient if q == "discrete"}))
+        which = "; ".join(filter(None, [which, f"the spring cells ({lattice}) alone have zero-energy modes that "
+                                               "the lattice around them does not hold"]))
     raise TensormassError(f"static solve refused: the stiffness at rest is singular, {which}. In this mesh "
                           "these modes are not held by the constraints, so the static displacement is not unique "
                           "(any amount of them solves it)")

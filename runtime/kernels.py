@@ -294,6 +294,8 @@ class Kernel:
         them (the runtime's per-step checks: a gather costs 3x the loop itself)."""
         if self.recompute:
             raise TensormassError(f"{self}: min_det_F() needs precomputed shape gradients (constants='precompute')")
+        if self.G_offset is None:
+            return self._record_det_F(D, u, cells)
         if cells is None:
             D, u = self._displacements(D, u)
             n = len(D)
@@ -308,6 +310,16 @@ class Kernel:
         (_min_det_3d if self.dim == 3 else _min_det_2d)(D, cells, U, self.n_points, self.point_stride,
                                                         self.G_offset, out)
         return out
+
+    def _record_det_F(self, D, u, cells) -> np.ndarray:
+        """det F of the stress record's F: a discrete kernel's (springs, lattice cubes: no shape
+        gradients) homogenised deformation gradient, the least-squares fit of its nodes (V / V0 of a cube)."""
+        if cells is not None:
+            u = np.asarray(u, dtype=np.float64).reshape(-1, self.dim)[cells]
+        S = self.stress(D, u)
+        at = self.stress_record["offsets"]["F"]
+        F = S[:, :, at:at + self.dim * self.dim].reshape(len(S), self.n_points, self.dim, self.dim)
+        return np.linalg.det(F).min(axis=1)
 
     def inverted(self, D, u, cells=None) -> np.ndarray:
         """Boolean mask of elements whose det F <= 0 at some integration point (any law)."""

@@ -182,6 +182,7 @@ class Model:
         # components of a load or prescribed-displacement vector: the displacement dofs
         self.n_load = min(self.dim, self.dofs_per_node)
         self._check_dof_loads(adapt)
+        self._check_discrete(materials, adapt)
         self.size = _size(mesh.points)
         self.box_tol = box_tolerance(mesh.points)
         self.outputs = outputs_for(self.solver.kind)
@@ -550,6 +551,17 @@ class Model:
                 f"kernel {kernel!r} for {element}: {kernel.n_nodes} nodes, {kernel.n_dofs} dofs in {kernel.dim}D; "
                 f"the model needs {k} nodes, {k * self.dofs_per_node} dofs ({self.dofs_per_node} per node) "
                 f"in {self.dim}D")
+
+    @staticmethod
+    def _check_discrete(materials, adapt) -> None:
+        """Discrete laws (springs, lattice cubes) have no integration points: [[adapt]] criteria and
+        law switching, which read strains there, are refused with them."""
+        discrete = sorted({m.law for m in materials if laws.is_discrete(m.law)}
+                          | {r.law for r in adapt if getattr(r, "law", None) and laws.is_discrete(r.law)})
+        if adapt and discrete:
+            raise TensormassError(f"[[adapt]] rules cannot be used with the discrete law {discrete[0]!r} (a spring "
+                                  "model has no integration points for their criteria, no law to switch to); "
+                                  "remove the [[adapt]] rules or use a continuum law")
 
     def _check_dof_loads(self, adapt) -> None:
         """Refuse what a model whose dofs are not a displacement field cannot mean."""

@@ -128,7 +128,8 @@ class Material:
     formulation: str = "displacement"    # runtime.formulations: displacement | mean_dilatation | nodal_pressure
 
     def native_parameters(self) -> dict:
-        """The law's native parameters as floats (from E, nu or as given; laws validates E and nu)."""
+        """The law's native parameters as floats (from E, nu or as given; laws validates E and nu;
+        a discrete law: E, nu and its options from params)."""
         law = laws.get(self.law)
         native = law.native_parameters(self.E, self.nu, **self.params)
         return {k: float(v) for k, v in native.items()}
@@ -595,7 +596,9 @@ class _Parser:
                              f"use \"all\", an element type ({', '.join(CELL_TYPES)}), an integer cell tag, "
                              "or box = [[...], [...]]")
         box = self.box(t["box"], f"{key}.box") if "box" in t else None
-        quadrature = self.string(t.get("quadrature", "gauss2"), f"{key}.quadrature")
+        # a discrete law (springs, lattice cubes) has one kernel per element: quadrature "discrete"
+        quadrature = self.string(t.get("quadrature", "discrete" if law.kind == "discrete" else "gauss2"),
+                                 f"{key}.quadrature")
         self._check_combination(key, region, law_name, quadrature)
         formulation = _formulation.formulation_name(t.get("formulation", "displacement"), f"{key}.formulation")
         if isinstance(region, str) and region in CELL_TYPES:    # validate() repeats it per cell type of the mesh
@@ -603,6 +606,8 @@ class _Parser:
         density = self.number(t.get("density", 1000.0), f"{key}.density")
         if density <= 0:
             raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
+        if law.kind == "discrete":
+            return self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
         native = {p: self.number(t[p], f"{key}.{p}") for p in law.parameters if p in t}
         E = nu = None
         if native and ("E" in t or "nu" in t):
@@ -632,6 +637,25 @@ class _Parser:
         bad = [p for p, v in values.items() if not math.isfinite(v)]
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
+        return mat
+
+    def _discrete_material(self, t, key, law, region, box, quadrature, formulation, density) -> Material:
+        """A discrete law's material: E and nu (what its stiffness rule converts) and its options (A)."""
+        if formulation != "displacement":
+            raise SceneError(f"{key}.formulation: law {law.name!r} is a discrete model (springs), it has no "
+                             f"locking-free formulation; remove formulation = {formulation!r}")
+        for name in ("E", "nu"):
+            if name not in t:
+                raise SceneError(f"{key}.{name}: missing; law {law.name!r} takes E and nu"
+                                 + "".join(f", optionally {o}" for o, _, _ in law.options))
+        E, nu = self.number(t["E"], f"{key}.E"), self.number(t["nu"], f"{key}.nu")
+        options = {o: self.number(t[o], f"{key}.{o}") for o, _, _ in law.options if o in t}
+        mat = Material(region=region, box=box, law=law.name, quadrature=quadrature, E=E, nu=nu,
+                       params=options, density=density, formulation=formulation)
+        try:
+            mat.native_parameters()
+        except laws.LawError as exc:
+            raise SceneError(_law_error(key, E, nu, exc)) from None
         return mat
 
     @staticmethod
@@ -819,6 +843,9 @@ class _Parser:
                 value = self.string(t[k], f"{key}.{k}")
                 if value not in laws.names():
                     raise SceneError(f"{key}.{k}: unknown law {value!r}; known: {', '.join(laws.names())}")
+                if laws.is_discrete(value):
+                    raise SceneError(f"{key}.{k}: law {value!r} is a discrete model (springs): cells cannot be "
+                                     "switched to or from it")
                 setattr(rule, attr, value)
         if rule.action == "switch_law":
             if rule.law is None:

@@ -97,6 +97,10 @@ def build_mesh(spec):
 
 def catalogue_check(key, element, law, quadrature):
     """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
+    from .. import laws as _laws
+    if law in _laws.discrete_names() and element not in _laws.get(law).elements:
+        raise SceneError(f"{key}: law {law!r} is a discrete model defined on {', '.join(_laws.get(law).elements)} "
+                         f"cells, not {element}")
     try:
         entries(elements=[element], law_names=[law], quadrature_names=[quadrature])
     except ValueError:

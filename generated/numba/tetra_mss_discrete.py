@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 # What the runtime reads (the same keys as every backend's metadata, constants layout included).
-METADATA = json.loads('{"dim": 3, "dofs_per_node": 3, "element": "tetra", "law": "mss", "material_offset": 10, "n_constants": 61, "n_dofs": 12, "n_nodes": 4, "n_points": 1, "name": "tetra_mss_discrete", "ops": {"constants": 134, "energy": 110, "forces": 204, "forces_and_stiffness": 771, "stiffness": 711, "stress": 674}, "parameters": ["E", "nu"], "point_fields": {"G": 1, "v": 0}, "point_stride": 10, "quadrature": "discrete", "recompute": false, "requires_positive_J": false, "stress_record": {"offsets": {"F": 2, "P": 11, "W": 1, "v": 0}, "size": 20}, "templates": "0ab80d1c6ed9db97"}')
+METADATA = json.loads('{"dim": 3, "dofs_per_node": 3, "element": "tetra", "law": "mss", "material_offset": 10, "n_constants": 61, "n_dofs": 12, "n_nodes": 4, "n_points": 1, "name": "tetra_mss_discrete", "ops": {"constants": 134, "energy": 110, "forces": 204, "forces_and_stiffness": 771, "stiffness": 711, "stress": 674}, "parameters": ["E", "nu"], "point_fields": {"v": 0}, "point_stride": 10, "quadrature": "discrete", "recompute": false, "requires_positive_J": false, "stress_record": {"offsets": {"F": 2, "P": 11, "W": 1, "v": 0}, "size": 20}, "templates": "0ab80d1c6ed9db97"}')
 
 
 # Reference shape gradients dN[q][i][k] and weights at the integration points.

@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 # What the runtime reads (the same keys as every backend's metadata, constants layout included).
-METADATA = json.loads('{"dim": 2, "dofs_per_node": 2, "element": "triangle", "law": "mss", "material_offset": 5, "n_constants": 25, "n_dofs": 6, "n_nodes": 3, "n_points": 1, "name": "triangle_mss_discrete", "ops": {"constants": 46, "energy": 38, "forces": 72, "forces_and_stiffness": 222, "stiffness": 204, "stress": 216}, "parameters": ["E", "nu"], "point_fields": {"G": 1, "v": 0}, "point_stride": 5, "quadrature": "discrete", "recompute": false, "requires_positive_J": false, "stress_record": {"offsets": {"F": 2, "P": 6, "P33": 10, "W": 1, "v": 0}, "size": 11}, "templates": "0ab80d1c6ed9db97"}')
+METADATA = json.loads('{"dim": 2, "dofs_per_node": 2, "element": "triangle", "law": "mss", "material_offset": 5, "n_constants": 25, "n_dofs": 6, "n_nodes": 3, "n_points": 1, "name": "triangle_mss_discrete", "ops": {"constants": 46, "energy": 38, "forces": 72, "forces_and_stiffness": 222, "stiffness": 204, "stress": 216}, "parameters": ["E", "nu"], "point_fields": {"v": 0}, "point_stride": 5, "quadrature": "discrete", "recompute": false, "requires_positive_J": false, "stress_record": {"offsets": {"F": 2, "P": 6, "P33": 10, "W": 1, "v": 0}, "size": 11}, "templates": "0ab80d1c6ed9db97"}')
 
 
 # Reference shape gradients dN[q][i][k] and weights at the integration points.
