@@ -179,8 +179,10 @@ class Kernel:
             raise DegenerateElementError(f"{self.element}: det J <= 0 in the rest configuration (inverted or degenerate)",
                                          np.flatnonzero(flags == 1))
         if np.any(flags == 2):
-            raise DegenerateElementError(f"{self.element}: quadrature 'exact' needs straight-edged elements (curved edges found)",
-                                         np.flatnonzero(flags == 2))
+            why = (f"law {self.law!r} is a lattice of springs: the cells must be cubes (edges or angles differ by "
+                   "more than about 0.1 %)" if self.G_offset is None and self.point_fields else
+                   "quadrature 'exact' needs straight-edged elements (curved edges found)")
+            raise DegenerateElementError(f"{self.element}: {why}", np.flatnonzero(flags == 2))
         return D
 
     # The four evaluations take optional output buffers (out=, flags=): with them a call

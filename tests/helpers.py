@@ -29,3 +29,19 @@ def relative_error(a, b) -> float:
     a, b = np.asarray(a), np.asarray(b)
     scale = max(np.abs(b).max(), 1e-300)
     return float(np.abs(a - b).max() / scale)
+
+
+def random_cubes(n: int, seed: int = 0, edge=(0.3, 2.0)) -> np.ndarray:
+    """(n, 8, 3) hexahedra that are cubes (the discrete lattice laws refuse others): the reference
+    cube scaled to a random edge, rotated at random and moved."""
+    from tensormass import elements
+    rng = np.random.default_rng(seed)
+    ref = np.array(elements.get("hexahedron").nodes, dtype=float) / 2
+    out = np.empty((n, 8, 3))
+    for e in range(n):
+        Q, R = np.linalg.qr(rng.standard_normal((3, 3)))
+        Q = Q * np.sign(np.diag(R))
+        if np.linalg.det(Q) < 0:
+            Q[:, 0] = -Q[:, 0]
+        out[e] = rng.uniform(*edge) * ref @ Q.T + rng.standard_normal(3)
+    return out

@@ -16,7 +16,7 @@ from tensormass.runtime.scene import Material
 from tensormass.runtime.uniform import to_quadratic
 
 CASES = [(form, el) for form, els in FORMULATIONS.items() if els for el in els]
-LAWS = laws.names()
+LAWS = laws.continuum_names()          # discrete laws (springs) have no formulations
 
 
 def _mesh(element: str, seed: int = 0) -> Mesh:
