@@ -11,7 +11,8 @@ torsion (the thesis' ch. 7 5 m cube: reaction force / torque on the top face aga
 formulas and the finest tetra10 run), adaptive_beam (hooke / stvk / adaptive hooke->stvk on a large-
 rotation cantilever), refinement (R_S refinement against uniform refinement; see adaptive.py), cook
 (Cook's membrane: locking of 2D elements and the locking-free formulations; cook.py) and block (a
-nearly incompressible cube of tetrahedra; block.py).
+nearly incompressible cube of tetrahedra; block.py) and hybmss (the thesis' chapter-7 tables: MSS-Baudet,
+HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
 `case` column (volume: nu and compression);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
@@ -75,13 +76,15 @@ from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
 from .block import block
+from .hybmss import hybmss
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
 
 COLUMNS = ["benchmark", "element", "law", "quadrature", "formulation", "cells", "case", "dofs", "value", "error_analytic",
-           "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
+           "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb",
+           "model", "reference_value", "thesis_value"]         # the last three: hybmss (blank elsewhere)
 
 # -- the built-in benchmark (SIZE, E_MOD, NU, RHO, G: common.py) --------------------------------------
 
@@ -333,7 +336,7 @@ def _csv_bytes(rows) -> bytes:
     w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in COLUMNS})
+        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in COLUMNS})
     return buf.getvalue().encode("utf-8")
 
 
@@ -482,7 +485,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement", "cook", "block")
+                   "adaptive_beam", "refinement", "cook", "block", "hybmss")
 
 
 def _resolve(benchmarks) -> list:
@@ -512,7 +515,7 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block}
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
