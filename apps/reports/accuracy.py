@@ -14,7 +14,8 @@ rotation cantilever), refinement (R_S refinement against uniform refinement; see
 nearly incompressible cube of tetrahedra; block.py) and hybmss (the thesis' chapter-7 tables: MSS-Baudet,
 HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
-`case` column (volume: nu and compression);
+`case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
+thesis_value (MODEL_COLUMNS);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
 benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
 
@@ -80,11 +81,12 @@ from .hybmss import hybmss
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
 
-__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
+__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "MODEL_COLUMNS", "BENCHMARK_NAMES"]
 
 COLUMNS = ["benchmark", "element", "law", "quadrature", "formulation", "cells", "case", "dofs", "value", "error_analytic",
-           "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb",
-           "model", "reference_value", "thesis_value"]         # the last three: hybmss (blank elsewhere)
+           "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
+# appended to results.csv when a row names its model (the hybmss benchmark; blank in the other rows)
+MODEL_COLUMNS = ["model", "reference_value", "thesis_value"]
 
 # -- the built-in benchmark (SIZE, E_MOD, NU, RHO, G: common.py) --------------------------------------
 
@@ -333,10 +335,11 @@ def pareto_front(rows, x="time_total", y="error_reference") -> list:
 
 def _csv_bytes(rows) -> bytes:
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
+    columns = COLUMNS + (MODEL_COLUMNS if any("model" in r for r in rows) else [])
+    w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in COLUMNS})
+        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in columns})
     return buf.getvalue().encode("utf-8")
 
 

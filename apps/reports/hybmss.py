@@ -214,6 +214,34 @@ def _failed_row(model, case_label, cells, law, quad, form, msg):
             "message": msg}
 
 
+class _Singular(Exception):
+    status = "singular"
+
+
+def _singular_at_rest(data) -> bool:
+    """Whether the constrained stiffness at rest of a scene is singular: K x = K z does not give z back
+    (sparse LU, a fixed pseudo-random z).  The runtime refuses such static runs only for laws whose
+    single cell has spurious zero modes (mss); hybmss at A = 0 and nu = 1/4 has the same springs and no
+    volume term (kappa = 0), so its lattice can be singular too and the runtime would not say so."""
+    import scipy.sparse.linalg as spla
+
+    from ...runtime.assembly import assemble
+    from ...runtime.model import Model
+    from ...runtime.scene import Scene
+    m = Model.from_scene(Scene.from_dict(copy.deepcopy(data)))
+    _, _, K = assemble(m, np.zeros(m.n_dofs))
+    free = np.asarray(m.free_dofs)
+    Kf = K[free][:, free].tocsc()
+    z = np.random.default_rng(7).standard_normal(free.size)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            x = spla.splu(Kf).solve(Kf @ z)
+    except RuntimeError:                  # "Factor is exactly singular"
+        return True
+    return not (np.all(np.isfinite(x)) and np.linalg.norm(x - z) <= 1e-3 * np.linalg.norm(z))
+
+
 def _one(model, case, cells, load, nu, bc, steps):
     """One run: a result row (a failed run is a row with value nan and its message)."""
     _, law, extra, col = _model(model)
@@ -221,15 +249,21 @@ def _one(model, case, cells, load, nu, bc, steps):
     form = extra.get("formulation", "displacement")
     label = f"{case} {_load_label(case, load)}" + (f" nu={nu:g} {bc}" if case in ("compression", "stretching") else "")
     try:
+        data = hybmss_scene(model, case, cells, load, nu, bc, steps)
+        if quad == "discrete" and _singular_at_rest(data):
+            raise _Singular("the stiffness at rest is singular: the lattice's zero-energy modes are not held by "
+                            "these boundary conditions, so the static answer is not unique (checked here, before "
+                            "the run)")
         with warnings.catch_warnings():      # a blowing-up Newton (a buckled lattice) overflows in numpy on its
             warnings.simplefilter("ignore", RuntimeWarning)      # way to the runtime's own error, kept below
-            summary, peak, sim = _run(hybmss_scene(model, case, cells, load, nu, bc, steps))
+            summary, peak, sim = _run(data)
         value = _measure(case, sim, summary)
         row = _row("hybmss", "hexahedron", law, quad, cells, label, summary, peak, value)
         row.update(formulation=form, status=summary.status, message="", main=False, model=model)
         row["newton"] = int(summary.iterations.get("newton", 0))
     except Exception as exc:  # noqa: BLE001 - a failed (e.g. buckled) model is a result, reported
-        row = _failed_row(model, label, cells, law, quad, form, f"{type(exc).__name__}: {exc}")
+        row = _failed_row(model, label, cells, law, quad, form,
+                          str(exc) if isinstance(exc, _Singular) else f"{type(exc).__name__}: {exc}")
         status = getattr(exc, "status", None)
         if status:
             row["status"] = status
@@ -326,7 +360,7 @@ def _fmt(row, spec):
         return "-"
     v = row["value"]
     if not math.isfinite(v):
-        return f"failed ({row.get('status', 'failed')})"
+        return "singular" if row.get("status") == "singular" else "failed"
     s = format(v, spec)
     if row.get("status") == "warnings":
         s += " (w)"
@@ -343,7 +377,11 @@ def _tables(rows, cfg, models) -> list:
     n = int(cfg["cube"])
     lines = ["Each cell: ours (the thesis' number for that model; its FEM column beside all three of our FEM "
              "models). (w): the run ended with warnings (e.g. inverted elements on the way). Static equilibrium "
-             "with load stepping replaces the thesis' 10 s of dynamics.", ""]
+             "with load stepping replaces the thesis' 10 s of dynamics. \"singular\": the constrained stiffness "
+             "at rest is singular (zero-energy modes of the lattice that these boundary conditions leave free), "
+             "so there is no unique static answer and the run was not made; \"failed\": Newton found no "
+             "equilibrium on the load path (a buckling lattice: the thesis saw MSS-Baudet and HybMSS-FD unstable "
+             "in compression).", ""]
     head = "| " + " | ".join(models) + " |"
     sep = "|" + "---:|" * len(models)
     for case, title, cells in (("compression", "Table 7.3, compression: volume change [%]", [n, n, n]),
@@ -402,8 +440,12 @@ def _tables(rows, cfg, models) -> list:
             cellsl.append(f"{sum(ts) / len(ts):.3f}" if ts else "-")
         lines.append(f"| {case} | " + " | ".join(cellsl) + " |")
     lines.append("")
-    failed = [r for r in rows if not math.isfinite(r["value"])]
+    failed = [r for r in rows if not math.isfinite(r["value"]) and r.get("status") != "singular"]
+    singular = [r for r in rows if r.get("status") == "singular"]
     if failed:
         lines += ["Runs that failed:", ""] + [f"- {r['model']} {r['case']} {r['cells']}: {r['message']}"
                                                for r in failed] + [""]
+    if singular:
+        lines += [f"Not run, singular stiffness at rest ({len(singular)}): "
+                  + "; ".join(f"{r['model']} {r['case']}" for r in singular) + ".", ""]
     return lines

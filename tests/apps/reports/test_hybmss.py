@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from tensormass.apps.reports.accuracy import COLUMNS, run_accuracy
+from tensormass.apps.reports.accuracy import COLUMNS, MODEL_COLUMNS, run_accuracy
 from tensormass.apps.reports.hybmss import analytic, hybmss, hybmss_scene
 
 SWEEP = {"cases": ["compression", "shear"], "strains": [0.05], "nus": [0.0, 0.499],
@@ -41,7 +41,7 @@ def test_analytic_references_are_the_thesis_numbers():
 
 def test_quick_report_rows_and_files(report):
     rows, header, table, md = report
-    assert header == COLUMNS and len(table) == len(rows) == 9
+    assert header == COLUMNS + MODEL_COLUMNS and len(table) == len(rows) == 9
     assert all(r["benchmark"] == "hybmss" and r["model"] for r in table)
     hyb = next(r for r in table if r["model"] == "HybMSS" and r["case"].startswith("shear"))
     assert float(hyb["thesis_value"]) == 3396.0 and float(hyb["reference_value"]) == pytest.approx(3571.43, abs=0.01)
