@@ -26,7 +26,7 @@ dynamics tends to.
                 about the vertical axis through its centre ([[fixed]] rotation); value = the top
                 support's reaction moment about that axis in N m (runtime/reactions.py)
                 (Table 7.6; analytic 1227 / 55223 N m)
-  bending       cantilever 2.4 x 0.4 x 0.4 m, 24 x 4 x 4 and 48 x 8 x 48 cells, E = 10 MPa,
+  bending       cantilever 2.4 x 0.4 x 0.4 m, 24 x 4 x 4 and 48 x 8 x 8 cells, E = 10 MPa,
                 nu = 0.25, clamped at x = 0, gravity g = 10 along -z, density RHO_BEND (the thesis
                 does not give rho; this keeps the tip deflection near 1.3 % of L); value = tip
                 deflection -u_z at (L, h/2, h/2) in m, against Euler-Bernoulli 1.5 rho g L^4/(E h^2)
