@@ -11,9 +11,11 @@ torsion (the thesis' ch. 7 5 m cube: reaction force / torque on the top face aga
 formulas and the finest tetra10 run), adaptive_beam (hooke / stvk / adaptive hooke->stvk on a large-
 rotation cantilever), refinement (R_S refinement against uniform refinement; see adaptive.py), cook
 (Cook's membrane: locking of 2D elements and the locking-free formulations; cook.py) and block (a
-nearly incompressible cube of tetrahedra; block.py).
+nearly incompressible cube of tetrahedra; block.py) and hybmss (the thesis' chapter-7 tables: MSS-Baudet,
+HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
-`case` column (volume: nu and compression);
+`case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
+thesis_value (MODEL_COLUMNS);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
 benchmark gets its own section, references and Pareto front in report.md and its own plot panel.
 
@@ -75,13 +77,16 @@ from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
 from .block import block
+from .hybmss import hybmss
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
 
-__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "BENCHMARK_NAMES"]
+__all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "MODEL_COLUMNS", "BENCHMARK_NAMES"]
 
 COLUMNS = ["benchmark", "element", "law", "quadrature", "formulation", "cells", "case", "dofs", "value", "error_analytic",
            "error_reference", "time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb"]
+# appended to results.csv when a row names its model (the hybmss benchmark; blank in the other rows)
+MODEL_COLUMNS = ["model", "reference_value", "thesis_value"]
 
 # -- the built-in benchmark (SIZE, E_MOD, NU, RHO, G: common.py) --------------------------------------
 
@@ -330,10 +335,11 @@ def pareto_front(rows, x="time_total", y="error_reference") -> list:
 
 def _csv_bytes(rows) -> bytes:
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
+    columns = COLUMNS + (MODEL_COLUMNS if any("model" in r for r in rows) else [])
+    w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in COLUMNS})
+        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in columns})
     return buf.getvalue().encode("utf-8")
 
 
@@ -482,7 +488,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement", "cook", "block")
+                   "adaptive_beam", "refinement", "cook", "block", "hybmss")
 
 
 def _resolve(benchmarks) -> list:
@@ -512,7 +518,7 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
     """
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block}
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
