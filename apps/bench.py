@@ -41,6 +41,7 @@ from .bench_history import add_history_command
 from .bench_formulations import add_formulations_command
 from .bench_integrators import add_integrators_command
 from .bench_organ import add_organ_command
+from .bench_springs import add_springs_command
 from .bench_steps import add_steps_command
 from .classic import LAWS, load_classic
 from .machine import format_machine, machine_info
@@ -525,6 +526,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_organ_command(sub)
     add_history_command(sub)
     add_formulations_command(sub)
+    add_springs_command(sub)
     return bench
 
 
