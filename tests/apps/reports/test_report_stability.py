@@ -37,7 +37,7 @@ def test_csv_columns_and_rows(quick):
         header = fh.readline().strip().split(",")
     assert tuple(header) == COLUMNS
     assert len(table) == len(rows) >= 20
-    outcomes = {"stable", "recovered", "diverged (detected)", "invalid (detected)"}
+    outcomes = {"stable", "recovered", "diverged (detected)", "invalid (detected)", "buckled (detected by the report)"}
     for r in table:
         assert r["outcome"] in outcomes or re.fullmatch(r"refused \(.+\)", r["outcome"]), r["outcome"]
 
@@ -154,3 +154,22 @@ def test_report_parser_route(tmp_path, monkeypatch):
     add_report_command(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["report", "stability", "--quick", "--out", str(tmp_path)])
     assert args.run(args) == 0
+
+
+def test_spring_lattices_buckle_without_face_diagonals(quick):
+    """Thesis Fig. 7.3 / 7.6: squeezed 20 %, MSS-Baudet and HybMSS-FD lose their symmetry, HybMSS holds."""
+    _, rows = quick
+    got = {r["law"]: r["outcome"] for r in rows if r["case"].startswith("spring compression")}
+    assert got == {"mss": "buckled (detected by the report)", "hybmss A=0": "buckled (detected by the report)",
+                   "hybmss A=1": "stable"}
+    assert {r["outcome"] for r in rows if r["case"].startswith("springs explicit 2x")} == {"diverged (detected)"}
+
+
+def test_asymmetry_measure():
+    from tensormass.apps.reports.springs_stability import asymmetry
+    points = np.array([[x, y, 0.0] for x in (0.0, 0.5, 1.0) for y in (0.0, 1.0)])
+    symmetric = np.column_stack([points[:, 0] - 0.5, np.zeros(6), -np.ones(6)])      # u_x odd, u_z even
+    assert asymmetry(points, symmetric, 1.0) == 0.0
+    bent = symmetric.copy()
+    bent[:, 1] = points[:, 0]                                                          # u_y not even
+    assert asymmetry(points, bent, 1.0) == pytest.approx(1.0, rel=1e-12)        # |x - (1 - x)| / max|u|
