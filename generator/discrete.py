@@ -169,14 +169,6 @@ class _DiscreteBuilder(_Builder):
     def read_u(self):
         return [Declare(f"u{i}_{k}", self.arr("u", i, k)) for i in range(self.n) for k in range(self.dim)]
 
-    def fragments(self, kind):
-        out = []
-        for k, fragment in enumerate(self.parts.code[kind]):
-            out.append(Comment(f"fragment {k}"))
-            out += [Declare(str(sym), e) for sym, e in fragment.temporaries]
-            out += [Declare(name, e) for name, e in fragment.outputs]
-        return out
-
     def prologue(self):
         return ([Declare("v", ref("D", 0))] + self.read_rest() + self.material() + self.read_u())
 
@@ -218,7 +210,7 @@ class _DiscreteBuilder(_Builder):
         out = self.prologue()
         if kind == "stress":
             out += [Declare(name, e) for name, e in self.parts.record_rest]
-        out += self.fragments(kind)
+        out += self.law(kind)               # the fragments of law_code[kind], as for the continuum kernels
         if kind == "energy":
             out.append(Assign(ref("out"), _s("W")))
         if kind in ("forces", "forces_and_stiffness"):

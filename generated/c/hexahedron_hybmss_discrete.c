@@ -903,7 +903,7 @@ void hexahedron_hybmss_discrete_energy(long n, const double *restrict D, const d
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = -u0_1;
         const double t_e2 = -u0_2;
@@ -1252,7 +1252,7 @@ void hexahedron_hybmss_discrete_forces(long n, const double *restrict D, const d
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_f0 = -u1_0;
         const double t_f1 = -u0_0;
         const double t_f2 = R1_0 + t_f1 + u1_0;
@@ -1865,7 +1865,7 @@ void hexahedron_hybmss_discrete_stiffness(long n, const double *restrict D, cons
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_sa0 = -u1_0;
         const double t_sa1 = k105 + t_sa0 + u0_0;
         const double t_sa2 = (t_sa1*t_sa1);
@@ -2744,7 +2744,7 @@ void hexahedron_hybmss_discrete_stiffness(long n, const double *restrict D, cons
         const double K8_12 = t_sa386*t_sa698 + t_sa626*t_sa715 + t_sa713;
         const double K8_13 = t_sa391*t_sa698 + t_sa627*t_sa715 + t_sa714;
         const double K8_14 = t_sa394*t_sa698 + t_sa628*t_sa715 + t_sa654*t_sa705 + t_sa711;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_sb0 = -u2_0;
         const double t_sb1 = k81 + t_sb0 + u5_0;
         const double t_sb2 = -u5_0;
@@ -4490,7 +4490,7 @@ void hexahedron_hybmss_discrete_stress(long n, const double *restrict D, const d
         const double S12 = (0.875)*R1_1*R1_2 - 0.125*R1_1*R2_2 - 0.125*R1_1*R3_2 - 0.125*R1_1*R4_2 - 0.125*R1_1*R5_2 - 0.125*R1_1*R6_2 - 0.125*R1_1*R7_2 - 0.125*R1_2*R2_1 - 0.125*R1_2*R3_1 - 0.125*R1_2*R4_1 - 0.125*R1_2*R5_1 - 0.125*R1_2*R6_1 - 0.125*R1_2*R7_1 + (0.875)*R2_1*R2_2 - 0.125*R2_1*R3_2 - 0.125*R2_1*R4_2 - 0.125*R2_1*R5_2 - 0.125*R2_1*R6_2 - 0.125*R2_1*R7_2 - 0.125*R2_2*R3_1 - 0.125*R2_2*R4_1 - 0.125*R2_2*R5_1 - 0.125*R2_2*R6_1 - 0.125*R2_2*R7_1 + (0.875)*R3_1*R3_2 - 0.125*R3_1*R4_2 - 0.125*R3_1*R5_2 - 0.125*R3_1*R6_2 - 0.125*R3_1*R7_2 - 0.125*R3_2*R4_1 - 0.125*R3_2*R5_1 - 0.125*R3_2*R6_1 - 0.125*R3_2*R7_1 + (0.875)*R4_1*R4_2 - 0.125*R4_1*R5_2 - 0.125*R4_1*R6_2 - 0.125*R4_1*R7_2 - 0.125*R4_2*R5_1 - 0.125*R4_2*R6_1 - 0.125*R4_2*R7_1 + (0.875)*R5_1*R5_2 - 0.125*R5_1*R6_2 - 0.125*R5_1*R7_2 - 0.125*R5_2*R6_1 - 0.125*R5_2*R7_1 + (0.875)*R6_1*R6_2 - 0.125*R6_1*R7_2 - 0.125*R6_2*R7_1 + (0.875)*R7_1*R7_2;
         const double S22 = (0.875)*(R1_2*R1_2) - 0.25*R1_2*R2_2 - 0.25*R1_2*R3_2 - 0.25*R1_2*R4_2 - 0.25*R1_2*R5_2 - 0.25*R1_2*R6_2 - 0.25*R1_2*R7_2 + (0.875)*(R2_2*R2_2) - 0.25*R2_2*R3_2 - 0.25*R2_2*R4_2 - 0.25*R2_2*R5_2 - 0.25*R2_2*R6_2 - 0.25*R2_2*R7_2 + (0.875)*(R3_2*R3_2) - 0.25*R3_2*R4_2 - 0.25*R3_2*R5_2 - 0.25*R3_2*R6_2 - 0.25*R3_2*R7_2 + (0.875)*(R4_2*R4_2) - 0.25*R4_2*R5_2 - 0.25*R4_2*R6_2 - 0.25*R4_2*R7_2 + (0.875)*(R5_2*R5_2) - 0.25*R5_2*R6_2 - 0.25*R5_2*R7_2 + (0.875)*(R6_2*R6_2) - 0.25*R6_2*R7_2 + (0.875)*(R7_2*R7_2);
         const double detS = S00*S11*S22 - S00*(S12*S12) - (S01*S01)*S22 + 2.0*S01*S02*S12 - (S02*S02)*S11;
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = R1_0 + t_e0 + u1_0;
         const double t_e2 = -u0_1;
@@ -4820,7 +4820,7 @@ void hexahedron_hybmss_discrete_stress(long n, const double *restrict D, const d
         const double f21 = t_e101*t_e262 + t_e106*t_e297 + t_e121*t_e216 + t_e231*(t_e256 + t_e300) + t_e252*t_e96 + t_e284*t_e56 + t_e289*t_e63 + t_e298*t_e69;
         const double f22 = t_e102*t_e262 + t_e107*t_e297 + t_e122*t_e216 + t_e231*(t_e242 + t_e302) + t_e252*t_e97 + t_e284*t_e58 + t_e289*t_e64 + t_e298*t_e71;
         const double f23 = t_e103*t_e262 + t_e108*t_e297 + t_e123*t_e216 + t_e231*(t_e258 + t_e303) + t_e252*t_e98 + t_e284*t_e60 + t_e289*t_e65 + t_e298*t_e73;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_r0 = (1.0/(v));
         const double t_r1 = (0.125)*R1_2;
         const double t_r2 = (0.125)*R2_2;
@@ -5263,7 +5263,7 @@ static void hexahedron_hybmss_discrete_forces_and_stiffness_scalar(long n, const
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_ga0 = -u1_0;
         const double t_ga1 = k105 + t_ga0 + u0_0;
         const double t_ga2 = -u0_0;
@@ -6233,7 +6233,7 @@ static void hexahedron_hybmss_discrete_forces_and_stiffness_scalar(long n, const
         const double K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794;
         const double K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784;
         const double K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_gb0 = -u2_0;
         const double t_gb1 = k8 + t_gb0 + u3_0;
         const double t_gb2 = -u3_2;
@@ -8126,7 +8126,7 @@ void hexahedron_hybmss_discrete_forces_and_stiffness(long n, const double *restr
         const tm_vd u7_0 = ue[21];
         const tm_vd u7_1 = ue[22];
         const tm_vd u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_ga0 = -u1_0;
         const tm_vd t_ga1 = k105 + t_ga0 + u0_0;
         const tm_vd t_ga2 = -u0_0;
@@ -9096,7 +9096,7 @@ void hexahedron_hybmss_discrete_forces_and_stiffness(long n, const double *restr
         const tm_vd K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794;
         const tm_vd K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784;
         const tm_vd K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778;
-        /* fragment 1 */
+        /* law fragment 1 */
         const tm_vd t_gb0 = -u2_0;
         const tm_vd t_gb1 = k8 + t_gb0 + u3_0;
         const tm_vd t_gb2 = -u3_2;
@@ -10916,7 +10916,7 @@ static void hexahedron_hybmss_discrete_forces_and_stiffness_scatter_scalar(long 
         const double u7_0 = ul[21];
         const double u7_1 = ul[22];
         const double u7_2 = ul[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_ga0 = -u1_0;
         const double t_ga1 = k105 + t_ga0 + u0_0;
         const double t_ga2 = -u0_0;
@@ -11886,7 +11886,7 @@ static void hexahedron_hybmss_discrete_forces_and_stiffness_scatter_scalar(long 
         const double K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794;
         const double K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784;
         const double K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_gb0 = -u2_0;
         const double t_gb1 = k8 + t_gb0 + u3_0;
         const double t_gb2 = -u3_2;
@@ -13705,7 +13705,7 @@ void hexahedron_hybmss_discrete_forces_and_stiffness_scatter(long n, const doubl
         const tm_vd u7_0 = ue[21];
         const tm_vd u7_1 = ue[22];
         const tm_vd u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_ga0 = -u1_0;
         const tm_vd t_ga1 = k105 + t_ga0 + u0_0;
         const tm_vd t_ga2 = -u0_0;
@@ -14675,7 +14675,7 @@ void hexahedron_hybmss_discrete_forces_and_stiffness_scatter(long n, const doubl
         const tm_vd K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794;
         const tm_vd K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784;
         const tm_vd K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778;
-        /* fragment 1 */
+        /* law fragment 1 */
         const tm_vd t_gb0 = -u2_0;
         const tm_vd t_gb1 = k8 + t_gb0 + u3_0;
         const tm_vd t_gb2 = -u3_2;

@@ -540,7 +540,7 @@ void hexahedron_mss_discrete_energy(long n, const double *restrict D, const doub
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = -u0_1;
         const double t_e2 = -u0_2;
@@ -721,7 +721,7 @@ void hexahedron_mss_discrete_forces(long n, const double *restrict D, const doub
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_f0 = -u6_0;
         const double t_f1 = -u0_0;
         const double t_f2 = R6_0 + t_f1 + u6_0;
@@ -1037,7 +1037,7 @@ void hexahedron_mss_discrete_stiffness(long n, const double *restrict D, const d
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_s0 = -u6_0;
         const double t_s1 = k54 + t_s0 + u0_0;
         const double t_s2 = (t_s1*t_s1);
@@ -2543,7 +2543,7 @@ void hexahedron_mss_discrete_stress(long n, const double *restrict D, const doub
         const double S12 = (0.875)*R1_1*R1_2 - 0.125*R1_1*R2_2 - 0.125*R1_1*R3_2 - 0.125*R1_1*R4_2 - 0.125*R1_1*R5_2 - 0.125*R1_1*R6_2 - 0.125*R1_1*R7_2 - 0.125*R1_2*R2_1 - 0.125*R1_2*R3_1 - 0.125*R1_2*R4_1 - 0.125*R1_2*R5_1 - 0.125*R1_2*R6_1 - 0.125*R1_2*R7_1 + (0.875)*R2_1*R2_2 - 0.125*R2_1*R3_2 - 0.125*R2_1*R4_2 - 0.125*R2_1*R5_2 - 0.125*R2_1*R6_2 - 0.125*R2_1*R7_2 - 0.125*R2_2*R3_1 - 0.125*R2_2*R4_1 - 0.125*R2_2*R5_1 - 0.125*R2_2*R6_1 - 0.125*R2_2*R7_1 + (0.875)*R3_1*R3_2 - 0.125*R3_1*R4_2 - 0.125*R3_1*R5_2 - 0.125*R3_1*R6_2 - 0.125*R3_1*R7_2 - 0.125*R3_2*R4_1 - 0.125*R3_2*R5_1 - 0.125*R3_2*R6_1 - 0.125*R3_2*R7_1 + (0.875)*R4_1*R4_2 - 0.125*R4_1*R5_2 - 0.125*R4_1*R6_2 - 0.125*R4_1*R7_2 - 0.125*R4_2*R5_1 - 0.125*R4_2*R6_1 - 0.125*R4_2*R7_1 + (0.875)*R5_1*R5_2 - 0.125*R5_1*R6_2 - 0.125*R5_1*R7_2 - 0.125*R5_2*R6_1 - 0.125*R5_2*R7_1 + (0.875)*R6_1*R6_2 - 0.125*R6_1*R7_2 - 0.125*R6_2*R7_1 + (0.875)*R7_1*R7_2;
         const double S22 = (0.875)*(R1_2*R1_2) - 0.25*R1_2*R2_2 - 0.25*R1_2*R3_2 - 0.25*R1_2*R4_2 - 0.25*R1_2*R5_2 - 0.25*R1_2*R6_2 - 0.25*R1_2*R7_2 + (0.875)*(R2_2*R2_2) - 0.25*R2_2*R3_2 - 0.25*R2_2*R4_2 - 0.25*R2_2*R5_2 - 0.25*R2_2*R6_2 - 0.25*R2_2*R7_2 + (0.875)*(R3_2*R3_2) - 0.25*R3_2*R4_2 - 0.25*R3_2*R5_2 - 0.25*R3_2*R6_2 - 0.25*R3_2*R7_2 + (0.875)*(R4_2*R4_2) - 0.25*R4_2*R5_2 - 0.25*R4_2*R6_2 - 0.25*R4_2*R7_2 + (0.875)*(R5_2*R5_2) - 0.25*R5_2*R6_2 - 0.25*R5_2*R7_2 + (0.875)*(R6_2*R6_2) - 0.25*R6_2*R7_2 + (0.875)*(R7_2*R7_2);
         const double detS = S00*S11*S22 - S00*(S12*S12) - (S01*S01)*S22 + 2.0*S01*S02*S12 - (S02*S02)*S11;
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = R6_0 + t_e0 + u6_0;
         const double t_e2 = -u0_1;
@@ -2689,7 +2689,7 @@ void hexahedron_mss_discrete_stress(long n, const double *restrict D, const doub
         const double f21 = t_e106*t_e9 + t_e115*t_e83 + t_e117*t_e88 + t_e119*t_e94;
         const double f22 = t_e106*t_e11 + t_e115*t_e84 + t_e117*t_e89 + t_e119*t_e96;
         const double f23 = t_e106*t_e13 + t_e115*t_e85 + t_e117*t_e90 + t_e119*t_e98;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_r0 = (1.0/(v));
         const double t_r1 = (0.125)*R1_2;
         const double t_r2 = (0.125)*R2_2;
@@ -3006,7 +3006,7 @@ static void hexahedron_mss_discrete_forces_and_stiffness_scalar(long n, const do
         const double u7_0 = ue[21];
         const double u7_1 = ue[22];
         const double u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u6_0;
         const double t_g1 = k54 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -4660,7 +4660,7 @@ void hexahedron_mss_discrete_forces_and_stiffness(long n, const double *restrict
         const tm_vd u7_0 = ue[21];
         const tm_vd u7_1 = ue[22];
         const tm_vd u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u6_0;
         const tm_vd t_g1 = k54 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;
@@ -6241,7 +6241,7 @@ static void hexahedron_mss_discrete_forces_and_stiffness_scatter_scalar(long n, 
         const double u7_0 = ul[21];
         const double u7_1 = ul[22];
         const double u7_2 = ul[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u6_0;
         const double t_g1 = k54 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -7821,7 +7821,7 @@ void hexahedron_mss_discrete_forces_and_stiffness_scatter(long n, const double *
         const tm_vd u7_0 = ue[21];
         const tm_vd u7_1 = ue[22];
         const tm_vd u7_2 = ue[23];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u6_0;
         const tm_vd t_g1 = k54 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;

@@ -242,7 +242,7 @@ void tetra_mss_discrete_energy(long n, const double *restrict D, const double *r
         const double u3_0 = ue[9];
         const double u3_1 = ue[10];
         const double u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = -u0_1;
         const double t_e2 = -u0_2;
@@ -338,7 +338,7 @@ void tetra_mss_discrete_forces(long n, const double *restrict D, const double *r
         const double u3_0 = ue[9];
         const double u3_1 = ue[10];
         const double u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_f0 = -u1_0;
         const double t_f1 = -u0_0;
         const double t_f2 = R1_0 + t_f1 + u1_0;
@@ -489,7 +489,7 @@ void tetra_mss_discrete_stiffness(long n, const double *restrict D, const double
         const double u3_0 = ue[9];
         const double u3_1 = ue[10];
         const double u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_s0 = -u1_0;
         const double t_s1 = k24 + t_s0 + u0_0;
         const double t_s2 = (t_s1*t_s1);
@@ -1027,7 +1027,7 @@ void tetra_mss_discrete_stress(long n, const double *restrict D, const double *r
         const double S12 = (0.75)*R1_1*R1_2 - 0.25*R1_1*R2_2 - 0.25*R1_1*R3_2 - 0.25*R1_2*R2_1 - 0.25*R1_2*R3_1 + (0.75)*R2_1*R2_2 - 0.25*R2_1*R3_2 - 0.25*R2_2*R3_1 + (0.75)*R3_1*R3_2;
         const double S22 = (0.75)*(R1_2*R1_2) - 0.5*R1_2*R2_2 - 0.5*R1_2*R3_2 + (0.75)*(R2_2*R2_2) - 0.5*R2_2*R3_2 + (0.75)*(R3_2*R3_2);
         const double detS = S00*S11*S22 - S00*(S12*S12) - (S01*S01)*S22 + 2.0*S01*S02*S12 - (S02*S02)*S11;
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = R1_0 + t_e0 + u1_0;
         const double t_e2 = -u0_1;
@@ -1089,7 +1089,7 @@ void tetra_mss_discrete_stress(long n, const double *restrict D, const double *r
         const double f9 = t_e16*t_e46 + t_e22*t_e47 + t_e29*t_e42;
         const double f10 = t_e17*t_e46 + t_e24*t_e47 + t_e30*t_e42;
         const double f11 = t_e18*t_e46 + t_e26*t_e47 + t_e31*t_e42;
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_r0 = (1.0/(v));
         const double t_r1 = (0.25)*R1_2;
         const double t_r2 = (0.25)*R2_2;
@@ -1270,7 +1270,7 @@ static void tetra_mss_discrete_forces_and_stiffness_scalar(long n, const double 
         const double u3_0 = ue[9];
         const double u3_1 = ue[10];
         const double u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u1_0;
         const double t_g1 = k24 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -1932,7 +1932,7 @@ void tetra_mss_discrete_forces_and_stiffness(long n, const double *restrict D, c
         const tm_vd u3_0 = ue[9];
         const tm_vd u3_1 = ue[10];
         const tm_vd u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u1_0;
         const tm_vd t_g1 = k24 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;
@@ -2521,7 +2521,7 @@ static void tetra_mss_discrete_forces_and_stiffness_scatter_scalar(long n, const
         const double u3_0 = ul[9];
         const double u3_1 = ul[10];
         const double u3_2 = ul[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u1_0;
         const double t_g1 = k24 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -3109,7 +3109,7 @@ void tetra_mss_discrete_forces_and_stiffness_scatter(long n, const double *restr
         const tm_vd u3_0 = ue[9];
         const tm_vd u3_1 = ue[10];
         const tm_vd u3_2 = ue[11];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u1_0;
         const tm_vd t_g1 = k24 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;

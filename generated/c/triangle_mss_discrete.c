@@ -129,7 +129,7 @@ void triangle_mss_discrete_energy(long n, const double *restrict D, const double
         const double u1_1 = ue[3];
         const double u2_0 = ue[4];
         const double u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double W = k1*tm_sq(k0 + sqrt(tm_sq(R1_0 - u0_0 + u1_0) + tm_sq(R1_1 - u0_1 + u1_1))) + k5*tm_sq(k4 + sqrt(tm_sq(k2 + u0_0 - u2_0) + tm_sq(k3 + u0_1 - u2_1))) + k9*tm_sq(k8 + sqrt(tm_sq(k6 - u1_0 + u2_0) + tm_sq(k7 - u1_1 + u2_1)));
         out[e] = W;
     }
@@ -174,7 +174,7 @@ void triangle_mss_discrete_forces(long n, const double *restrict D, const double
         const double u1_1 = ue[3];
         const double u2_0 = ue[4];
         const double u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_f0 = -u1_0;
         const double t_f1 = -u0_0;
         const double t_f2 = R1_0 + t_f1 + u1_0;
@@ -247,7 +247,7 @@ void triangle_mss_discrete_stiffness(long n, const double *restrict D, const dou
         const double u1_1 = ue[3];
         const double u2_0 = ue[4];
         const double u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_s0 = -u1_0;
         const double t_s1 = k10 + t_s0 + u0_0;
         const double t_s2 = (t_s1*t_s1);
@@ -435,7 +435,7 @@ void triangle_mss_discrete_stress(long n, const double *restrict D, const double
         const double S01 = (0.6666666666666666)*R1_0*R1_1 - 0.3333333333333333*R1_0*R2_1 - 0.3333333333333333*R1_1*R2_0 + (0.6666666666666666)*R2_0*R2_1;
         const double S11 = (0.6666666666666666)*(R1_1*R1_1) - 0.6666666666666666*R1_1*R2_1 + (0.6666666666666666)*(R2_1*R2_1);
         const double detS = S00*S11 - (S01*S01);
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_e0 = -u0_0;
         const double t_e1 = R1_0 + t_e0 + u1_0;
         const double t_e2 = -u0_1;
@@ -464,7 +464,7 @@ void triangle_mss_discrete_stress(long n, const double *restrict D, const double
         const double f3 = t_e18*t_e3 + t_e20*(k16 + t_e8 + u1_1);
         const double f4 = t_e13*t_e20 + t_e19*(R2_0 + t_e0 + u2_0);
         const double f5 = t_e15*t_e20 + t_e19*(R2_1 + t_e2 + u2_1);
-        /* fragment 1 */
+        /* law fragment 1 */
         const double t_r0 = (1.0/(v));
         const double t_r1 = (0.3333333333333333)*R1_1;
         const double t_r2 = (0.3333333333333333)*R2_1;
@@ -555,7 +555,7 @@ static void triangle_mss_discrete_forces_and_stiffness_scalar(long n, const doub
         const double u1_1 = ue[3];
         const double u2_0 = ue[4];
         const double u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u1_0;
         const double t_g1 = k10 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -858,7 +858,7 @@ void triangle_mss_discrete_forces_and_stiffness(long n, const double *restrict D
         const tm_vd u1_1 = ue[3];
         const tm_vd u2_0 = ue[4];
         const tm_vd u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u1_0;
         const tm_vd t_g1 = k10 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;
@@ -1087,7 +1087,7 @@ static void triangle_mss_discrete_forces_and_stiffness_scatter_scalar(long n, co
         const double u1_1 = ul[3];
         const double u2_0 = ul[4];
         const double u2_1 = ul[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const double t_g0 = -u1_0;
         const double t_g1 = k10 + t_g0 + u0_0;
         const double t_g2 = -u0_0;
@@ -1315,7 +1315,7 @@ void triangle_mss_discrete_forces_and_stiffness_scatter(long n, const double *re
         const tm_vd u1_1 = ue[3];
         const tm_vd u2_0 = ue[4];
         const tm_vd u2_1 = ue[5];
-        /* fragment 0 */
+        /* law fragment 0 */
         const tm_vd t_g0 = -u1_0;
         const tm_vd t_g1 = k10 + t_g0 + u0_0;
         const tm_vd t_g2 = -u0_0;

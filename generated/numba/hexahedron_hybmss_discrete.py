@@ -892,7 +892,7 @@ def energy(D, u, out, flags):
         u7_0 = u[e, 7, 0]
         u7_1 = u[e, 7, 1]
         u7_2 = u[e, 7, 2]
-        # fragment 0
+        # law fragment 0
         t_e0 = -u0_0
         t_e1 = -u0_1
         t_e2 = -u0_2
@@ -1236,7 +1236,7 @@ def forces(D, u, f, flags):
         u7_0 = u[e, 7, 0]
         u7_1 = u[e, 7, 1]
         u7_2 = u[e, 7, 2]
-        # fragment 0
+        # law fragment 0
         t_f0 = -u1_0
         t_f1 = -u0_0
         t_f2 = R1_0 + t_f1 + u1_0
@@ -1844,7 +1844,7 @@ def stiffness(D, u, K, flags):
         u7_0 = u[e, 7, 0]
         u7_1 = u[e, 7, 1]
         u7_2 = u[e, 7, 2]
-        # fragment 0
+        # law fragment 0
         t_sa0 = -u1_0
         t_sa1 = k105 + t_sa0 + u0_0
         t_sa2 = (t_sa1*t_sa1)
@@ -2723,7 +2723,7 @@ def stiffness(D, u, K, flags):
         K8_12 = t_sa386*t_sa698 + t_sa626*t_sa715 + t_sa713
         K8_13 = t_sa391*t_sa698 + t_sa627*t_sa715 + t_sa714
         K8_14 = t_sa394*t_sa698 + t_sa628*t_sa715 + t_sa654*t_sa705 + t_sa711
-        # fragment 1
+        # law fragment 1
         t_sb0 = -u2_0
         t_sb1 = k81 + t_sb0 + u5_0
         t_sb2 = -u5_0
@@ -4453,7 +4453,7 @@ def forces_and_stiffness(D, u, f, K, flags):
         u7_0 = u[e, 7, 0]
         u7_1 = u[e, 7, 1]
         u7_2 = u[e, 7, 2]
-        # fragment 0
+        # law fragment 0
         t_ga0 = -u1_0
         t_ga1 = k105 + t_ga0 + u0_0
         t_ga2 = -u0_0
@@ -5423,7 +5423,7 @@ def forces_and_stiffness(D, u, f, K, flags):
         K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794
         K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784
         K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778
-        # fragment 1
+        # law fragment 1
         t_gb0 = -u2_0
         t_gb1 = k8 + t_gb0 + u3_0
         t_gb2 = -u3_2
@@ -7207,7 +7207,7 @@ def stress(D, u, S, flags):
         S12 = (0.875)*R1_1*R1_2 - 0.125*R1_1*R2_2 - 0.125*R1_1*R3_2 - 0.125*R1_1*R4_2 - 0.125*R1_1*R5_2 - 0.125*R1_1*R6_2 - 0.125*R1_1*R7_2 - 0.125*R1_2*R2_1 - 0.125*R1_2*R3_1 - 0.125*R1_2*R4_1 - 0.125*R1_2*R5_1 - 0.125*R1_2*R6_1 - 0.125*R1_2*R7_1 + (0.875)*R2_1*R2_2 - 0.125*R2_1*R3_2 - 0.125*R2_1*R4_2 - 0.125*R2_1*R5_2 - 0.125*R2_1*R6_2 - 0.125*R2_1*R7_2 - 0.125*R2_2*R3_1 - 0.125*R2_2*R4_1 - 0.125*R2_2*R5_1 - 0.125*R2_2*R6_1 - 0.125*R2_2*R7_1 + (0.875)*R3_1*R3_2 - 0.125*R3_1*R4_2 - 0.125*R3_1*R5_2 - 0.125*R3_1*R6_2 - 0.125*R3_1*R7_2 - 0.125*R3_2*R4_1 - 0.125*R3_2*R5_1 - 0.125*R3_2*R6_1 - 0.125*R3_2*R7_1 + (0.875)*R4_1*R4_2 - 0.125*R4_1*R5_2 - 0.125*R4_1*R6_2 - 0.125*R4_1*R7_2 - 0.125*R4_2*R5_1 - 0.125*R4_2*R6_1 - 0.125*R4_2*R7_1 + (0.875)*R5_1*R5_2 - 0.125*R5_1*R6_2 - 0.125*R5_1*R7_2 - 0.125*R5_2*R6_1 - 0.125*R5_2*R7_1 + (0.875)*R6_1*R6_2 - 0.125*R6_1*R7_2 - 0.125*R6_2*R7_1 + (0.875)*R7_1*R7_2
         S22 = (0.875)*(R1_2*R1_2) - 0.25*R1_2*R2_2 - 0.25*R1_2*R3_2 - 0.25*R1_2*R4_2 - 0.25*R1_2*R5_2 - 0.25*R1_2*R6_2 - 0.25*R1_2*R7_2 + (0.875)*(R2_2*R2_2) - 0.25*R2_2*R3_2 - 0.25*R2_2*R4_2 - 0.25*R2_2*R5_2 - 0.25*R2_2*R6_2 - 0.25*R2_2*R7_2 + (0.875)*(R3_2*R3_2) - 0.25*R3_2*R4_2 - 0.25*R3_2*R5_2 - 0.25*R3_2*R6_2 - 0.25*R3_2*R7_2 + (0.875)*(R4_2*R4_2) - 0.25*R4_2*R5_2 - 0.25*R4_2*R6_2 - 0.25*R4_2*R7_2 + (0.875)*(R5_2*R5_2) - 0.25*R5_2*R6_2 - 0.25*R5_2*R7_2 + (0.875)*(R6_2*R6_2) - 0.25*R6_2*R7_2 + (0.875)*(R7_2*R7_2)
         detS = S00*S11*S22 - S00*(S12*S12) - (S01*S01)*S22 + 2.0*S01*S02*S12 - (S02*S02)*S11
-        # fragment 0
+        # law fragment 0
         t_e0 = -u0_0
         t_e1 = R1_0 + t_e0 + u1_0
         t_e2 = -u0_1
@@ -7537,7 +7537,7 @@ def stress(D, u, S, flags):
         f21 = t_e101*t_e262 + t_e106*t_e297 + t_e121*t_e216 + t_e231*(t_e256 + t_e300) + t_e252*t_e96 + t_e284*t_e56 + t_e289*t_e63 + t_e298*t_e69
         f22 = t_e102*t_e262 + t_e107*t_e297 + t_e122*t_e216 + t_e231*(t_e242 + t_e302) + t_e252*t_e97 + t_e284*t_e58 + t_e289*t_e64 + t_e298*t_e71
         f23 = t_e103*t_e262 + t_e108*t_e297 + t_e123*t_e216 + t_e231*(t_e258 + t_e303) + t_e252*t_e98 + t_e284*t_e60 + t_e289*t_e65 + t_e298*t_e73
-        # fragment 1
+        # law fragment 1
         t_r0 = (1.0/(v))
         t_r1 = (0.125)*R1_2
         t_r2 = (0.125)*R2_2
@@ -7980,7 +7980,7 @@ def forces_and_stiffness_scatter(D, U, cells, pos, fg, data, flags):
         u7_0 = ul[7, 0]
         u7_1 = ul[7, 1]
         u7_2 = ul[7, 2]
-        # fragment 0
+        # law fragment 0
         t_ga0 = -u1_0
         t_ga1 = k105 + t_ga0 + u0_0
         t_ga2 = -u0_0
@@ -8950,7 +8950,7 @@ def forces_and_stiffness_scatter(D, U, cells, pos, fg, data, flags):
         K7_9 = t_ga277*t_ga786 + t_ga401*t_ga561 + t_ga589*t_ga778 + t_ga794
         K7_10 = t_ga278*t_ga786 + t_ga283 + t_ga591*t_ga778 + t_ga758*t_ga784
         K7_11 = t_ga276*t_ga786 + t_ga353*t_ga779 + t_ga408*t_ga561 + t_ga594*t_ga778
-        # fragment 1
+        # law fragment 1
         t_gb0 = -u2_0
         t_gb1 = k8 + t_gb0 + u3_0
         t_gb2 = -u3_2

@@ -231,7 +231,7 @@ def energy(D, u, out, flags):
         u3_0 = u[e, 3, 0]
         u3_1 = u[e, 3, 1]
         u3_2 = u[e, 3, 2]
-        # fragment 0
+        # law fragment 0
         t_e0 = -u0_0
         t_e1 = -u0_1
         t_e2 = -u0_2
@@ -322,7 +322,7 @@ def forces(D, u, f, flags):
         u3_0 = u[e, 3, 0]
         u3_1 = u[e, 3, 1]
         u3_2 = u[e, 3, 2]
-        # fragment 0
+        # law fragment 0
         t_f0 = -u1_0
         t_f1 = -u0_0
         t_f2 = R1_0 + t_f1 + u1_0
@@ -468,7 +468,7 @@ def stiffness(D, u, K, flags):
         u3_0 = u[e, 3, 0]
         u3_1 = u[e, 3, 1]
         u3_2 = u[e, 3, 2]
-        # fragment 0
+        # law fragment 0
         t_s0 = -u1_0
         t_s1 = k24 + t_s0 + u0_0
         t_s2 = (t_s1*t_s1)
@@ -990,7 +990,7 @@ def forces_and_stiffness(D, u, f, K, flags):
         u3_0 = u[e, 3, 0]
         u3_1 = u[e, 3, 1]
         u3_2 = u[e, 3, 2]
-        # fragment 0
+        # law fragment 0
         t_g0 = -u1_0
         t_g1 = k24 + t_g0 + u0_0
         t_g2 = -u0_0
@@ -1543,7 +1543,7 @@ def stress(D, u, S, flags):
         S12 = (0.75)*R1_1*R1_2 - 0.25*R1_1*R2_2 - 0.25*R1_1*R3_2 - 0.25*R1_2*R2_1 - 0.25*R1_2*R3_1 + (0.75)*R2_1*R2_2 - 0.25*R2_1*R3_2 - 0.25*R2_2*R3_1 + (0.75)*R3_1*R3_2
         S22 = (0.75)*(R1_2*R1_2) - 0.5*R1_2*R2_2 - 0.5*R1_2*R3_2 + (0.75)*(R2_2*R2_2) - 0.5*R2_2*R3_2 + (0.75)*(R3_2*R3_2)
         detS = S00*S11*S22 - S00*(S12*S12) - (S01*S01)*S22 + 2.0*S01*S02*S12 - (S02*S02)*S11
-        # fragment 0
+        # law fragment 0
         t_e0 = -u0_0
         t_e1 = R1_0 + t_e0 + u1_0
         t_e2 = -u0_1
@@ -1605,7 +1605,7 @@ def stress(D, u, S, flags):
         f9 = t_e16*t_e46 + t_e22*t_e47 + t_e29*t_e42
         f10 = t_e17*t_e46 + t_e24*t_e47 + t_e30*t_e42
         f11 = t_e18*t_e46 + t_e26*t_e47 + t_e31*t_e42
-        # fragment 1
+        # law fragment 1
         t_r0 = (1.0/(v))
         t_r1 = (0.25)*R1_2
         t_r2 = (0.25)*R2_2
@@ -1786,7 +1786,7 @@ def forces_and_stiffness_scatter(D, U, cells, pos, fg, data, flags):
         u3_0 = ul[3, 0]
         u3_1 = ul[3, 1]
         u3_2 = ul[3, 2]
-        # fragment 0
+        # law fragment 0
         t_g0 = -u1_0
         t_g1 = k24 + t_g0 + u0_0
         t_g2 = -u0_0

@@ -118,7 +118,7 @@ def energy(D, u, out, flags):
         u1_1 = u[e, 1, 1]
         u2_0 = u[e, 2, 0]
         u2_1 = u[e, 2, 1]
-        # fragment 0
+        # law fragment 0
         W = k1*((k0 + math.sqrt(((R1_0 - u0_0 + u1_0)*(R1_0 - u0_0 + u1_0)) + ((R1_1 - u0_1 + u1_1)*(R1_1 - u0_1 + u1_1))))*(k0 + math.sqrt(((R1_0 - u0_0 + u1_0)*(R1_0 - u0_0 + u1_0)) + ((R1_1 - u0_1 + u1_1)*(R1_1 - u0_1 + u1_1))))) + k5*((k4 + math.sqrt(((k2 + u0_0 - u2_0)*(k2 + u0_0 - u2_0)) + ((k3 + u0_1 - u2_1)*(k3 + u0_1 - u2_1))))*(k4 + math.sqrt(((k2 + u0_0 - u2_0)*(k2 + u0_0 - u2_0)) + ((k3 + u0_1 - u2_1)*(k3 + u0_1 - u2_1))))) + k9*((k8 + math.sqrt(((k6 - u1_0 + u2_0)*(k6 - u1_0 + u2_0)) + ((k7 - u1_1 + u2_1)*(k7 - u1_1 + u2_1))))*(k8 + math.sqrt(((k6 - u1_0 + u2_0)*(k6 - u1_0 + u2_0)) + ((k7 - u1_1 + u2_1)*(k7 - u1_1 + u2_1)))))
         out[e] = W
 
@@ -158,7 +158,7 @@ def forces(D, u, f, flags):
         u1_1 = u[e, 1, 1]
         u2_0 = u[e, 2, 0]
         u2_1 = u[e, 2, 1]
-        # fragment 0
+        # law fragment 0
         t_f0 = -u1_0
         t_f1 = -u0_0
         t_f2 = R1_0 + t_f1 + u1_0
@@ -226,7 +226,7 @@ def stiffness(D, u, K, flags):
         u1_1 = u[e, 1, 1]
         u2_0 = u[e, 2, 0]
         u2_1 = u[e, 2, 1]
-        # fragment 0
+        # law fragment 0
         t_s0 = -u1_0
         t_s1 = k10 + t_s0 + u0_0
         t_s2 = (t_s1*t_s1)
@@ -401,7 +401,7 @@ def forces_and_stiffness(D, u, f, K, flags):
         u1_1 = u[e, 1, 1]
         u2_0 = u[e, 2, 0]
         u2_1 = u[e, 2, 1]
-        # fragment 0
+        # law fragment 0
         t_g0 = -u1_0
         t_g1 = k10 + t_g0 + u0_0
         t_g2 = -u0_0
@@ -592,7 +592,7 @@ def stress(D, u, S, flags):
         S01 = (0.6666666666666666)*R1_0*R1_1 - 0.3333333333333333*R1_0*R2_1 - 0.3333333333333333*R1_1*R2_0 + (0.6666666666666666)*R2_0*R2_1
         S11 = (0.6666666666666666)*(R1_1*R1_1) - 0.6666666666666666*R1_1*R2_1 + (0.6666666666666666)*(R2_1*R2_1)
         detS = S00*S11 - (S01*S01)
-        # fragment 0
+        # law fragment 0
         t_e0 = -u0_0
         t_e1 = R1_0 + t_e0 + u1_0
         t_e2 = -u0_1
@@ -621,7 +621,7 @@ def stress(D, u, S, flags):
         f3 = t_e18*t_e3 + t_e20*(k16 + t_e8 + u1_1)
         f4 = t_e13*t_e20 + t_e19*(R2_0 + t_e0 + u2_0)
         f5 = t_e15*t_e20 + t_e19*(R2_1 + t_e2 + u2_1)
-        # fragment 1
+        # law fragment 1
         t_r0 = (1.0/(v))
         t_r1 = (0.3333333333333333)*R1_1
         t_r2 = (0.3333333333333333)*R2_1
@@ -711,7 +711,7 @@ def forces_and_stiffness_scatter(D, U, cells, pos, fg, data, flags):
         u1_1 = ul[1, 1]
         u2_0 = ul[2, 0]
         u2_1 = ul[2, 1]
-        # fragment 0
+        # law fragment 0
         t_g0 = -u1_0
         t_g1 = k10 + t_g0 + u0_0
         t_g2 = -u0_0
