@@ -45,3 +45,12 @@ def random_cubes(n: int, seed: int = 0, edge=(0.3, 2.0)) -> np.ndarray:
             Q[:, 0] = -Q[:, 0]
         out[e] = rng.uniform(*edge) * ref @ Q.T + rng.standard_normal(3)
     return out
+
+
+def catalogue_elements(element: str, law: str, quadrature: str, n: int, seed: int = 0) -> np.ndarray:
+    """Random rest elements a catalogue entry accepts: cubes for the lattice (discrete) laws on
+    hexahedra, straight edges for quadrature 'exact', random curved elements otherwise."""
+    from tensormass import laws
+    if laws.is_discrete(law) and element == "hexahedron":
+        return random_cubes(n, seed=seed)
+    return random_elements(element, n, seed=seed, straight=quadrature == "exact")

@@ -16,7 +16,7 @@ from tensormass import laws
 from tensormass.generator.catalogue import catalogue
 from tensormass.generator.ir import law_degree
 
-from helpers import random_cubes, random_elements, relative_error
+from helpers import catalogue_elements, random_elements, relative_error
 
 ALL = catalogue()
 SAMPLE = [e for e in ALL if e.name in {
@@ -30,10 +30,7 @@ SELECTED = ALL if os.environ.get("TENSORMASS_ALL_BACKENDS") == "1" else SAMPLE
 def test_c_equals_numba(entry):
     numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
     c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
-    if laws.is_discrete(entry.law) and entry.element == "hexahedron":      # lattice laws: cubes only
-        X = random_cubes(11, seed=3)
-    else:
-        X = random_elements(entry.element, 11, seed=3, straight=entry.quadrature == "exact")   # 2 blocks of 4 + 3
+    X = catalogue_elements(entry.element, entry.law, entry.quadrature, 11, seed=3)                                  # 2 blocks of 4 + 3
     D = numba.constants(X, E=2.0, nu=0.3)
     assert relative_error(c.constants(X, E=2.0, nu=0.3), D) < 1e-12
     u = 0.04 * np.random.default_rng(1).standard_normal((len(X), numba.n_dofs))
@@ -80,7 +77,7 @@ def test_fused_scatter_c_equals_numba(entry):
     numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
     c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
     n, k, d = 11, numba.n_nodes, numba.dim                                # 2 blocks of 4 + 3
-    X = random_elements(entry.element, n, seed=4, straight=entry.quadrature == "exact")
+    X = catalogue_elements(entry.element, entry.law, entry.quadrature, n, seed=4)
     D = numba.constants(X, E=2.0, nu=0.3)
     rng = np.random.default_rng(5)
     n_points = 2 * k

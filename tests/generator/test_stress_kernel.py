@@ -17,7 +17,7 @@ import tensormass as tm
 from tensormass.generator.catalogue import entries
 from tensormass.generator.kernel_body import stress_record
 
-from helpers import random_elements, relative_error
+from helpers import catalogue_elements, relative_error
 
 # 3D and 2D, linear and quadratic, three laws; all compiled by test_backends_agree already.
 # CI's regeneration step (TENSORMASS_ALL_BACKENDS=1) compares C and numba on every entry.
@@ -27,8 +27,8 @@ SELECTED = ([(e.element, e.law, e.quadrature) for e in entries()]
             if os.environ.get("TENSORMASS_ALL_BACKENDS") == "1" else ENTRIES)
 
 
-def _state(kernel, n=11, seed=3, straight=False):
-    X = random_elements(kernel.element, n, seed=seed, straight=straight)
+def _state(kernel, n=11, seed=3):
+    X = catalogue_elements(kernel.element, kernel.law, kernel.quadrature, n, seed=seed)
     D = kernel.constants(X, E=2.0, nu=0.3)
     u = 0.04 * np.random.default_rng(seed).standard_normal((n, kernel.n_nodes, kernel.dim))
     return D, u
@@ -38,7 +38,7 @@ def _state(kernel, n=11, seed=3, straight=False):
 def test_stress_c_equals_numba(entry):
     numba = tm.load_kernel(*entry, backend="numba")
     c = tm.load_kernel(*entry, backend="c")
-    D, u = _state(numba, straight=entry[2] == "exact")
+    D, u = _state(numba)
     Sn, Sc = numba.stress(D, u), c.stress(D, u)
     assert Sn.shape == (len(D), numba.n_points, numba.stress_record["size"])
     assert relative_error(Sc, Sn) < 1e-12
@@ -51,7 +51,7 @@ def test_record_matches_the_other_kernels(entry):
     assert k.stress_record == stress_record(d)
     assert ("P33" in k.stress_record["offsets"]) == (d == 2)
     at = k.stress_record["offsets"]
-    D, u = _state(k, straight=entry[2] == "exact")
+    D, u = _state(k)
     S = k.stress(D, u)
     v = S[..., at["v"]]
     assert relative_error(v, k.point_volumes(D)) < 1e-14
