@@ -83,6 +83,8 @@ class ElementType:
     regular_measure measure of the regular element of this shape with unit edges (adaptation R_M, R_HM)
     flip            node permutation that mirrors the reference element onto itself (orientation fix)
     refinement      refinement pattern ("bisection": longest-edge bisection), None where not defined
+    file_type       the meshio / VTK cell type its cells are stored as (None: its own name; the
+                    shell: "triangle")
     """
     name: str
     nodes: tuple
@@ -99,6 +101,7 @@ class ElementType:
     dofs_per_node: int | None = None
     space_dims: tuple | None = None
     refinement: str | None = None
+    file_type: str | None = None
     description: str = field(default="", compare=False)
 
     def __post_init__(self):
@@ -106,6 +109,8 @@ class ElementType:
             object.__setattr__(self, "linear", self.name)
         if self.space_dims is None:
             object.__setattr__(self, "space_dims", (self.dim,))
+        if self.file_type is None:
+            object.__setattr__(self, "file_type", self.name)
         if min(self.space_dims) < self.dim:
             raise ValueError(f"{self.name}: space dimension below the topological dimension {self.dim}")
         if any(len(p) != self.dim for p in self.nodes):
@@ -119,6 +124,11 @@ class ElementType:
     @property
     def n_nodes(self) -> int:
         return len(self.nodes)
+
+    @property
+    def solid(self) -> bool:
+        """A continuum element: its nodes carry the displacement only (dofs per node = space dimension)."""
+        return self.dofs_per_node is None
 
     @property
     def simplex(self) -> bool:

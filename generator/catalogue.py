@@ -5,7 +5,9 @@ from dataclasses import dataclass
 
 from .. import laws
 from .elements import ELEMENTS
+from .. import elements as elements_table
 from .discrete import QUADRATURE as DISCRETE
+from .shell import QUADRATURE as SHELL
 from .ir import EXACT, exact_degree
 from .quadrature import GAUSS_RULES
 
@@ -27,6 +29,10 @@ def quadratures(element: str, law: str) -> list[str]:
     the_law = laws.kernel_law(law)
     if the_law.kind == "discrete":
         return [DISCRETE] if element in the_law.elements else []
+    if the_law.kind == "shell":
+        return [SHELL] if element in the_law.elements else []
+    if not elements_table.get(element).solid:        # structural elements: their own laws only
+        return []
     names = list(GAUSS_RULES)
     if exact_degree(element, laws.kernel_law(law)) is not None:
         names.append(EXACT)

@@ -59,11 +59,13 @@ class KernelIR:
     input_hash: str              # hash of element, rule, law source, generator version
     bodies: dict                 # kind -> statement tree of one element (generator/kernel_body.py)
     stress_record: dict          # layout of the stress kernel's per-point record (kernel_body.stress_record)
-    source: str = "continuum"    # the energy: a law's W(F), or "discrete" (generator/discrete.py: nodal positions)
+    source: str = "continuum"    # the energy: a law's W(F), "discrete" (generator/discrete.py: nodal positions)
+    #                              or "shell" (generator/shell.py: nodal displacements and rotations)
+    dofs: int = 0                # unknowns per node; 0: the space dimension (solids)
 
     @property
     def dofs_per_node(self) -> int:
-        return self.dim
+        return self.dofs or self.dim
 
     @property
     def point_fields(self) -> dict:
@@ -71,7 +73,7 @@ class KernelIR:
         rest measure) and G (shape gradients: not for recompute or discrete kernels)."""
         if self.recompute:
             return {}
-        return {"v": 0} if self.source == "discrete" else {"v": 0, "G": 1}
+        return {"v": 0} if self.source in ("discrete", "shell") else {"v": 0, "G": 1}
 
     @property
     def n_dofs(self) -> int:
@@ -131,6 +133,11 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     if constants not in CONSTANTS_MODES:
         raise ValueError(f"unknown constants mode {constants!r}; use one of {', '.join(CONSTANTS_MODES)}")
     law = laws_pkg.kernel_law(law_name)
+    if law.kind == "shell":                     # an energy in nodal displacements and rotations: generator/shell.py
+        from .shell import QUADRATURE as SHELL, build_shell_ir
+        if quadrature != SHELL:
+            raise ValueError(f"law {law_name!r} is a shell law: its kernels have quadrature {SHELL!r}, not {quadrature!r}")
+        return build_shell_ir(element_name, law_name, max_ops, constants)
     if law.kind == "discrete":                  # an element energy in nodal positions: generator/discrete.py
         from .discrete import QUADRATURE, build_discrete_ir
         if quadrature != QUADRATURE:

@@ -157,6 +157,7 @@ class _Builder:
     def __init__(self, ir):
         self.ir = ir
         self.dim, self.n = ir.dim, ir.n_nodes
+        self.dofs = ir.dofs_per_node           # = dim for solids; 6 for shells (u, f, K rows per node)
         self.n_dofs = ir.n_dofs
         self.names = ARRAYS
 
@@ -240,17 +241,17 @@ class _Builder:
 
     def mirror_stiffness(self):
         return [Comment("Only node blocks j >= i were accumulated: copy them below the diagonal."),
-                Loop("r", 0, self.n_dofs, (Loop("s", 0, IntDiv(r, self.dim) * self.dim,
+                Loop("r", 0, self.n_dofs, (Loop("s", 0, IntDiv(r, self.dofs) * self.dofs,
                                                  (Assign(self.arr("K", r, s), self.arr("K", s, r)),)),))]
 
     def gather_u(self):
         """ul[i, a] = U[cells[e, i], a]: the element's displacements read from the global array."""
         return [Loop("i", 0, self.n, (Declare("node", ref("cells", i), integer=True),)
-                     + tuple(Assign(ref("ul", i, a), ref("U", node, a)) for a in range(self.dim)))]
+                     + tuple(Assign(ref("ul", i, a), ref("U", node, a)) for a in range(self.dofs)))]
 
     def scatter(self):
         """fl into fg, then Kl into data node block by node block, through cells and pos."""
-        d = self.dim
+        d = self.dofs
         forces = Loop("i", 0, self.n, (Declare("node", ref("cells", i), integer=True),)
                       + tuple(Accumulate(ref("fg", node * d + a), ref("fl", i * d + a)) for a in range(d)))
         blocks = Loop("r", 0, self.n_dofs, (Loop("j", 0, self.n, (

@@ -31,7 +31,12 @@ FORMAT = 1
 
 def face_types() -> list:
     """Names of the face types the built-in element types use, sorted."""
-    return sorted({f.type for name in _types.builtin() for f in _types.get(name).faces})
+    return sorted({f.type for name in _solid() for f in _types.get(name).faces})
+
+
+def _solid() -> list:
+    """The built-in solid element types (shells have no shape table: their kernels are structural)."""
+    return [n for n in _types.builtin() if _types.get(n).solid]
 
 
 def type_of(name: str):
@@ -83,8 +88,8 @@ def table(name: str) -> dict:
 
 def build() -> dict:
     """Every element type of the table and every face type they use."""
-    names = sorted(set(_types.builtin()) | set(face_types()))
-    return {"format": FORMAT, "faces": {e: sorted({f.type for f in _types.get(e).faces}) for e in sorted(_types.builtin())},
+    names = sorted(set(_solid()) | set(face_types()))
+    return {"format": FORMAT, "faces": {e: sorted({f.type for f in _types.get(e).faces}) for e in sorted(_solid())},
             "types": {n: table(n) for n in names}}
 
 

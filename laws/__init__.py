@@ -16,8 +16,8 @@ from functools import lru_cache
 
 from .base import DiscreteLaw, Law, LawError, lame_from_E_nu
 
-__all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names",
-           "is_discrete", "is_quadratic", "measure_names", "kernel_law"]
+__all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names", "shell_names",
+           "is_discrete", "is_shell", "is_quadratic", "measure_names", "kernel_law"]
 
 
 @lru_cache(maxsize=None)
@@ -46,6 +46,16 @@ def continuum_names() -> list[str]:
 def discrete_names() -> list[str]:
     """The discrete laws (springs, lattice cubes: an element energy in nodal positions), sorted."""
     return [n for n, law in _registry().items() if law.kind == "discrete"]
+
+
+def shell_names() -> list[str]:
+    """The shell laws (laws/cst_dkt.py: an energy in nodal displacements and rotations), sorted."""
+    return [n for n, law in _registry().items() if law.kind == "shell"]
+
+
+def is_shell(name: str) -> bool:
+    """True for a shell law (cst_dkt): element "shell", quadrature "exact", 6 dofs per node."""
+    return name in shell_names()
 
 
 def is_discrete(name: str) -> bool:

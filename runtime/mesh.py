@@ -43,8 +43,8 @@ __all__ = [
 
 # Built-in types, read from the element table (types registered later: elements.get).
 NODES_PER_CELL = {name: _types.get(name).n_nodes for name in _types.builtin()}
-SOLID_TYPES_3D = tuple(n for n in _types.builtin() if _types.get(n).dim == 3)
-SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2)
+SOLID_TYPES_3D = tuple(n for n in _types.builtin() if _types.get(n).dim == 3 and _types.get(n).solid)
+SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2 and _types.get(n).solid)
 # What generate_bar builds, by space dimension (a capability of the bar generator, not of the table).
 BAR_ELEMENTS = {3: ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed"),
                 2: ("triangle", "triangle6", "quad", "mixed")}
@@ -213,7 +213,7 @@ def read_mesh(path) -> Mesh:
     if unknown:
         raise MeshError(f"{path}: unknown cell type(s) {', '.join(unknown)}")
     dim = max(dims.values(), default=-1)
-    solid = _types.names(dim=dim)
+    solid = tuple(t for t in _types.names(dim=dim) if _types.get(t).solid)   # shells: [mesh] element = "shell"
     if dim < 2 and not any(t in solid for t in dims):   # lower-dimensional cells of a registered type only
         raise MeshError(f"{path}: no 2D or 3D cells (found: {', '.join(sorted(dims)) or 'none'})")
     bad = sorted(t for t, d in dims.items() if d == dim and t not in solid)
@@ -362,7 +362,7 @@ def to_meshio(mesh: Mesh, pad_to_3d: bool = False, tag_name: str = "cell_tags"):
     points = mesh.points
     if pad_to_3d and mesh.dim == 2:
         points = np.column_stack([points, np.zeros(mesh.n_points)])
-    cells = [(b.type, b.cells) for b in mesh.blocks]
+    cells = [(_types.get(b.type).file_type, b.cells) for b in mesh.blocks]     # a shell is a VTK triangle
     cell_data = {}
     if any(b.tags is not None for b in mesh.blocks):
         cell_data[tag_name] = [b.tags if b.tags is not None else np.zeros(len(b), np.int64)

@@ -268,6 +268,7 @@ class CModule:
         self.COMPILE_SECONDS = compiled["seconds"] if compiled else 0.0
         self.COMPILE_MAXRSS_MB = compiled["maxrss_mb"] if compiled else 0.0
         self._n_dofs = int(meta["n_dofs"])
+        self._n_coords = int(meta["n_nodes"]) * int(meta["dim"])     # X: fewer than the dofs for shells
         self._n_constants = int(meta["n_constants"])
         self._n_parameters = len(meta["parameters"])
         self._n_record = int(meta["n_points"]) * int(meta["stress_record"]["size"])
@@ -293,7 +294,7 @@ class CModule:
     def constants(self, X, params, D, flags):
         n = len(X)
         self._functions["constants"](
-            n, self._double(X, self._n_dofs, n, "X"), self._double(params, self._n_parameters, n, "params"),
+            n, self._double(X, self._n_coords, n, "X"), self._double(params, self._n_parameters, n, "params"),
             self._double(D, self._n_constants, n, "D", True), self._flags(flags, n))
 
     def energy(self, D, u, out, flags):

@@ -65,20 +65,20 @@ class CStatements(StatementPrinter):
 
     def __init__(self, ir, expr_printer=None, writes_D=False):
         super().__init__(expr_printer or CPrinter(), IndexPrinter("/"))
-        d, n_dofs = ir.dim, ir.n_dofs
+        d, n_dofs, p = ir.dim, ir.n_dofs, ir.dofs_per_node
         # Inside the point loop, D is read through a pointer to the point's block, Dq (GCC
         # generates better addressing from it than from De[q * stride + ...]: measured).
         self.stride = ir.point_stride
         self.writes_D = writes_D
         # array -> (pointer name, row lengths for flattening; None: a C multi-dimensional table)
-        self.arrays = {"X": ("Xe", (d,)), "params": ("pe", ()), "D": ("De", ()), "u": ("ue", (d,)),
+        self.arrays = {"X": ("Xe", (d,)), "params": ("pe", ()), "D": ("De", ()), "u": ("ue", (p,)),
                        "f": ("fe", ()), "K": ("Ke", (n_dofs,)), "Gq": ("Gq", (d,)), "out": ("out", ()),
                        "S": ("Se", (ir.stress_record["size"],)),
                        "DN": ("DN", None), "WEIGHTS": ("WEIGHTS", None),
                        # the fused kernel: element rows of cells and pos, global arrays, scratch
-                       "cells": ("ce", ()), "pos": ("Pe", (ir.n_nodes,)), "U": ("U", (d,)),
+                       "cells": ("ce", ()), "pos": ("Pe", (ir.n_nodes,)), "U": ("U", (p,)),
                        "fg": ("fg", ()), "data": ("data", ()),
-                       "ul": ("ul", (d,)), "fl": ("fl", ()), "Kl": ("Kl", (n_dofs,))}
+                       "ul": ("ul", (p,)), "fl": ("fl", ()), "Kl": ("Kl", (n_dofs,))}
 
     def ref(self, array, indices):
         name, rows = self.arrays[array]
