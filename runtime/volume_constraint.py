@@ -29,7 +29,12 @@ import numpy as np
 __all__ = ["VolumeConstraint", "VolumeConstraintError", "PenaltyForces", "check_closed_surface"]
 
 RELATIVE_TOLERANCE = 1e-12   # |V(x_new) - V0| / V0 after project
-_ZERO_COEFFICIENT = 1e-12    # a coefficient below this fraction of its terms' magnitudes is roundoff
+_ZERO_COEFFICIENT = 1e-12    # a coefficient below this fraction of its terms' bound is roundoff
+
+
+def _triple(a, b, c) -> np.ndarray:
+    """Row-wise a . (b x c)."""
+    return np.einsum("ij,ij->i", a, np.cross(b, c))
 
 
 class VolumeConstraintError(RuntimeError):
@@ -116,9 +121,11 @@ class VolumeConstraint:
         return x
 
     def volume(self, x) -> float:
-        """Signed enclosed volume (divergence theorem): sum over triangles of x0 . (x1 x x2) / 6."""
+        """Signed enclosed volume (divergence theorem): sum over triangles of x0 . (x1 x x2) / 6.
+
+        Summed exactly as the cubic's c0 (same order), so that project(rest) returns lam = 0."""
         p = self._positions(x)[self.triangles]
-        return float(np.einsum("ij,ij->", p[:, 0], np.cross(p[:, 1], p[:, 2])) / 6.0)
+        return float(_triple(p[:, 0], p[:, 1], p[:, 2]).sum()) / 6.0
 
     def vertex_normals(self, x) -> np.ndarray:
         """dV/dx_i (n, 3): sum over the incident triangles of (x_j x x_k) / 6, (i, j, k) cyclic.
@@ -134,24 +141,26 @@ class VolumeConstraint:
                         axis=1)
 
     def _cubic_terms(self, x, d):
-        """Coefficients (c0, c1, c2, c3) of V(x + lam d) and the sums of their terms' magnitudes.
+        """Coefficients (c0, c1, c2, c3) of V(x + lam d) and bounds of their terms.
 
         Expanding (x0 + lam d0) . ((x1 + lam d1) x (x2 + lam d2)): each power of lam collects the
-        triple products with that many d's; the magnitudes tell roundoff from a true coefficient."""
+        triple products with that many d's.  The bounds (the same sums with |x_a| |x_b| |d_c| for
+        each triple product) tell roundoff from a true coefficient, also when every term is
+        roundoff (a translation: d x d = 0 for equal d's)."""
         px, pd = x[self.triangles], d[self.triangles]
         x0, x1, x2 = px[:, 0], px[:, 1], px[:, 2]
         d0, d1, d2 = pd[:, 0], pd[:, 1], pd[:, 2]
-
-        def triple(a, b, c):
-            return np.einsum("ij,ij->i", a, np.cross(b, c))
-
-        groups = [[triple(x0, x1, x2)],
-                  [triple(d0, x1, x2), triple(x0, d1, x2), triple(x0, x1, d2)],
-                  [triple(x0, d1, d2), triple(d0, x1, d2), triple(d0, d1, x2)],
-                  [triple(d0, d1, d2)]]
+        groups = [[_triple(x0, x1, x2)],
+                  [_triple(d0, x1, x2), _triple(x0, d1, x2), _triple(x0, x1, d2)],
+                  [_triple(x0, d1, d2), _triple(d0, x1, d2), _triple(d0, d1, x2)],
+                  [_triple(d0, d1, d2)]]
         coefficients = np.array([sum(float(t.sum()) for t in g) for g in groups]) / 6.0
-        magnitudes = np.array([sum(float(np.abs(t).sum()) for t in g) for g in groups]) / 6.0
-        return coefficients, magnitudes
+        nx, nd = np.linalg.norm(px, axis=2).T, np.linalg.norm(pd, axis=2).T
+        bounds = [nx[0] * nx[1] * nx[2],
+                  nd[0] * nx[1] * nx[2] + nx[0] * nd[1] * nx[2] + nx[0] * nx[1] * nd[2],
+                  nx[0] * nd[1] * nd[2] + nd[0] * nx[1] * nd[2] + nd[0] * nd[1] * nx[2],
+                  nd[0] * nd[1] * nd[2]]
+        return coefficients, np.array([float(b.sum()) for b in bounds]) / 6.0
 
     def cubic_coefficients(self, x, directions) -> np.ndarray:
         """[c0, c1, c2, c3] with V(x + lam directions) = c0 + c1 lam + c2 lam^2 + c3 lam^3, exactly."""
@@ -185,8 +194,8 @@ class VolumeConstraint:
             raise VolumeConstraintError("all directions are zero (every node held?): nothing can restore the volume")
         v0 = self.rest_volume
         c, size = self._cubic_terms(x, d)
-        c = np.where(np.abs(c) <= _ZERO_COEFFICIENT * size, 0.0, c)
-        c[0] = c[0] - v0
+        c[1:] = np.where(np.abs(c[1:]) <= _ZERO_COEFFICIENT * size[1:], 0.0, c[1:])
+        c[0] = c[0] - v0                 # exactly 0 at x = rest: volume() sums as c0 does
         lam = self._smallest_real_root(c, v0)
         x_new = x + lam * d
         for step in range(5):   # the cubic's root is exact; this absorbs the roundoff of x + lam d
