@@ -263,8 +263,9 @@ def check_colouring(cells, colours) -> None:
 # ------------------------------------------------------------------------------------- matvec
 
 @njit(cache=True, parallel=True)
-def _coloured_matvec(Ke, dofs, order, starts, x, y, transpose):
-    """y += sum_e P_e Ke x_e, colour after colour; the elements of one colour in parallel.
+def _coloured_matvec(Ke, dofs, starts, x, y, transpose):
+    """y += sum_e P_e Ke x_e (Ke^T with `transpose`), colour after colour, the elements of one
+    colour (rows starts[c]:starts[c+1] of Ke and dofs, stored in colour order) in parallel.
 
     Within a colour no two elements share a node, so each entry of y is written by one thread
     only; the element product is plain loops in a fixed order (no BLAS, whose sums may depend on
@@ -272,17 +273,19 @@ def _coloured_matvec(Ke, dofs, order, starts, x, y, transpose):
     """
     n_e = dofs.shape[1]
     for c in range(starts.shape[0] - 1):
-        for t in prange(starts[c + 1] - starts[c]):
-            e = order[starts[c] + t]
-            for a in range(n_e):
-                s = 0.0
-                if transpose:
+        for e in prange(starts[c], starts[c + 1]):
+            if transpose:
+                for a in range(n_e):
+                    s = 0.0
                     for b in range(n_e):
                         s += Ke[e, b, a] * x[dofs[e, b]]
-                else:
+                    y[dofs[e, a]] += s
+            else:
+                for a in range(n_e):
+                    s = 0.0
                     for b in range(n_e):
                         s += Ke[e, a, b] * x[dofs[e, b]]
-                y[dofs[e, a]] += s
+                    y[dofs[e, a]] += s
 
 
 class ColouredOperator:
@@ -309,10 +312,14 @@ class ColouredOperator:
         self.n_nodes = int(cells.max(initial=-1)) + 1 if n_nodes is None else int(n_nodes)
         if self.n_nodes <= int(cells.max(initial=-1)):
             raise ValueError(f"n_nodes={self.n_nodes} but the cells use node {int(cells.max())}")
-        self.cells, self.dofs_per_node, self.Ke = cells, d, Ke
+        self.cells, self.dofs_per_node = cells, d
         self.colours = np.asarray(colours, dtype=np.int32)
-        self.dofs = (cells[:, :, None] * d + np.arange(d)).reshape(m, k * d)
+        # Element blocks and dof rows copied into colour order: each colour is then one contiguous
+        # run that the matvec streams through (in element order the colour classes jump across
+        # memory, about 4 times slower on 50k tetrahedra).  `order[i]`: the element in row i.
         self.order = np.argsort(self.colours, kind="stable").astype(np.int64)
+        self.Ke = np.ascontiguousarray(Ke[self.order])
+        self.dofs = np.ascontiguousarray((cells[self.order, :, None] * d + np.arange(d)).reshape(m, k * d))
         counts = np.bincount(self.colours, minlength=1) if m else np.zeros(0, dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.n = self.n_nodes * d
@@ -327,8 +334,8 @@ class ColouredOperator:
         if x.shape[0] != self.n:
             raise ValueError(f"x has {x.shape[0]} entries, the operator {self.n}")
         y = np.zeros(self.n)
-        if len(self.order):
-            _coloured_matvec(self.Ke, self.dofs, self.order, self.starts, x, y, transpose)
+        if len(self.dofs):
+            _coloured_matvec(self.Ke, self.dofs, self.starts, x, y, transpose)
         return y
 
     def matvec(self, x) -> np.ndarray:
