@@ -169,3 +169,18 @@ def test_matvec_bit_identical_across_thread_counts():
         numba.set_num_threads(before)
     for y in two:
         assert np.array_equal(one.view(np.int64), y.view(np.int64))
+
+
+def test_bench_meshes():
+    """The benchmark's meshes (apps.bench_colouring; its timings are not run here)."""
+    from tensormass.apps.bench_colouring import icosphere, plate, tet_mesh
+    sphere = icosphere(1280)
+    assert sphere.shape == (1280, 3)
+    edges = np.sort(np.concatenate([sphere[:, [0, 1]], sphere[:, [1, 2]], sphere[:, [2, 0]]]), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(counts == 2)                                       # closed surface
+    assert sphere.max() + 1 - len(unique) + len(sphere) == 2          # Euler characteristic of a sphere
+    assert set(np.bincount(sphere.ravel()).tolist()) == {5, 6}
+    assert plate(50).shape == (50, 3) and tet_mesh(300).shape[1] == 4
+    for cells in (sphere, plate(50)):
+        col.check_colouring(cells, col.colour_cells(cells))
