@@ -317,7 +317,7 @@ class Kernel:
         """det F of the stress record's F: a discrete kernel's (springs, lattice cubes: no shape
         gradients) homogenised deformation gradient, the least-squares fit of its nodes (V / V0 of a cube)."""
         if cells is not None:
-            u = np.asarray(u, dtype=np.float64).reshape(-1, self.dim)[cells]
+            u = np.asarray(u, dtype=np.float64).reshape(-1, self.dofs_per_node)[cells]
         S = self.stress(D, u)
         at = self.stress_record["offsets"]["F"]
         F = S[:, :, at:at + self.dim * self.dim].reshape(len(S), self.n_points, self.dim, self.dim)

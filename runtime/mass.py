@@ -71,6 +71,7 @@ class MassMatrix:
         """From the model's parts: each cell counted once (in the part whose law models it now)."""
         n_points = points.shape[0]
         node_mass = np.zeros(n_points)
+        node_rotary = np.zeros(n_points)           # sum of m_a x (rotary inertia per unit mass)
         blocks = []
         for i, part in enumerate(parts):
             rows = np.flatnonzero(part.active)
@@ -84,10 +85,22 @@ class MassMatrix:
             else:   # a registered element without shape tables: its measure split equally (diagonal)
                 share = part.density[rows] * part.volume[rows] / cells.shape[1]
                 Me = share[:, None, None] * np.eye(cells.shape[1])
-            np.add.at(node_mass, cells, lump(Me, part.element))
+            lumped = lump(Me, part.element)
+            np.add.at(node_mass, cells, lumped)
+            if getattr(part, "rotary", None) is not None:
+                np.add.at(node_rotary, cells, lumped * np.asarray(part.rotary, float)[rows, None])
             blocks.append((i, rows, cells, Me))
         if np.any(node_mass < 0):
             raise TensormassError("negative density gives negative nodal masses")
+        space = points.shape[1]
+        if dim > space and any(getattr(p, "rotary", None) is not None for p in parts):
+            # nodes with rotations (shells): translations, then rotary inertia
+            if kind != "lumped":
+                raise TensormassError("solver.mass = \"consistent\" is not available for shells (nodes with "
+                                      "rotations); use the default lumped mass")
+            per_dof = np.concatenate([np.repeat(node_mass[:, None], space, axis=1),
+                                      np.repeat(node_rotary[:, None], dim - space, axis=1)], axis=1)
+            return cls(kind, dim, n_points * dim, per_dof.ravel(), blocks)
         return cls(kind, dim, n_points * dim, np.repeat(node_mass, dim), blocks)
 
     # -- use -------------------------------------------------------------------------------------

@@ -59,6 +59,7 @@ class Part:
     dofs: np.ndarray             # (n, k * dofs_per_node) global dofs, node-major
     density: np.ndarray          # (n,) mass density of each cell
     active: np.ndarray | None = None   # (n,) bool: cells this law currently models (None: all)
+    rotary: np.ndarray | None = None   # (n,) rotary inertia per unit mass (m^2) of nodes with rotations (shells)
 
     def __post_init__(self):
         if self.active is None:
@@ -145,6 +146,19 @@ def _element_dim(cell_type: str) -> int:
 
 def _size(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 1.0
+
+
+def _shell_kernel(kernel, law: str, flags: list):
+    """The co-rotational wrapper around a linear shell kernel (runtime.corotational) where the
+    materials ask for it (option corotational = 1, the default); corotational = 0: the kernel itself."""
+    flag = np.asarray(flags, float)
+    if np.any(flag != flag.flat[0]):
+        raise TensormassError(f"law {law!r}: materials of the same cells mix corotational = 0 and 1; "
+                              "give every shell material the same value")
+    if flag.flat[0] == 0:
+        return kernel
+    from .corotational import CorotationalShell
+    return CorotationalShell(kernel)
 
 
 def assign_materials(mesh: Mesh, materials) -> list:
@@ -269,13 +283,19 @@ class Model:
                     kernel = _kernels.load_kernel(element, name, quad, backend=self.solver.backend)
                 self._check_kernel_dofs(kernel, element, cells)
                 params = self._parameters(name, members)
+                if laws.is_shell(name):
+                    flags = [float(dict(self.materials[m].params).get("corotational", 1.0)) for _, _, m in members]
+                    kernel = _shell_kernel(kernel, name, flags)
                 if formulated is not None:
                     formulated.part, formulated.full_params = len(parts), params
                     params = formulated.deviatoric(params)
                 D = self._constants(kernel, cells, cell_ids, params)
                 volume = kernel.point_volumes(D).sum(axis=1)       # the layout from the kernel's metadata
                 active = np.full(len(cells), k == 0)
-                parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active))
+                # a shell node's rotary inertia per unit mass: h^2 / 12 (runtime.mass)
+                rotary = params["thickness"] ** 2 / 12 if laws.is_shell(name) else None
+                parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active,
+                                  rotary=rotary))
             if len(reach) > 1:
                 self.groups.append(LawGroup(list(range(first, len(parts))), list(reach),
                                             np.zeros(len(cells), dtype=np.int64)))
@@ -420,7 +440,9 @@ class Model:
             value = float(load.value)
             if not np.isfinite(value):
                 raise TensormassError(f"loads.pressure[{i}].value must be a finite number, got {load.value!r}")
-            if getattr(load, "region", None) is not None:
+            if self.shells:
+                faces = self._shells_in(load, f"loads.pressure[{i}]")
+            elif getattr(load, "region", None) is not None:
                 faces = region_faces(self.mesh, load.region, load.box, key=f"loads.pressure[{i}].region",
                                      tol=self.box_tol, what="a pressure")
             else:
@@ -431,10 +453,25 @@ class Model:
             loads.append((faces, value))
         if not loads:
             return None
-        pressure = FollowerPressure(self.mesh.points, loads, self.dim)
+        pressure = FollowerPressure(self.mesh.points, loads, self.dim, self.dofs_per_node)
         # open surfaces: the full (non-symmetric) stiffness unless CG (symmetric only) solves
         pressure.symmetric = pressure.closed or self.solver.linear in ("cg", "amg")
         return pressure
+
+    @property
+    def shells(self) -> bool:
+        """A shell mesh: its triangles are the surface (pressure acts on them, against their normal)."""
+        return any(b.type == "shell" for b in self.mesh.blocks)
+
+    def _shells_in(self, load, key) -> dict:
+        """{"triangle": the shell cells whose nodes are all inside the load's box (all without one)}."""
+        if getattr(load, "region", None) not in (None, "all"):
+            raise TensormassError(f"{key}.region: a shell mesh has no named regions here; use box = [[...], [...]]")
+        cells = np.vstack([b.cells for b in self.mesh.blocks if b.type == "shell"])
+        if load.box is not None:
+            inside = box_contains(load.box, self.mesh.points, self.box_tol)
+            cells = cells[inside[cells].all(axis=1)]
+        return {"triangle": cells} if len(cells) else {}
 
     def _add_region_load(self, f, load, value, i):
         """A force (split evenly over the region's nodes) or a traction (f_a = int N_a t dA over the
@@ -514,7 +551,9 @@ class Model:
         return np.array([ids.get(law, -1) for law in self.cell_laws()], dtype=np.int64)
 
     def probe_values(self, u: np.ndarray) -> dict:
+        """Each probe's interpolated displacement (the nodal values where nodes carry fewer dofs)."""
         U = self.nodal(u)
+        U = U[:, :self.dim] if U.shape[1] > self.dim else U        # a shell's rotations: not probed
         return {name: probe.value(U).tolist() for name, probe in self.probes.items()}
 
     def probe_info(self) -> dict:

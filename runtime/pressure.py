@@ -40,10 +40,12 @@ def _skew(v):
 class FollowerPressure:
     """Pressure loads on sets of faces; values may differ per set (Pa, positive pushes inward)."""
 
-    def __init__(self, points: np.ndarray, loads, dim: int):
+    def __init__(self, points: np.ndarray, loads, dim: int, dofs_per_node: int | None = None):
         self.X = np.asarray(points, float)
         self.dim = dim
-        self.n_dofs = self.X.shape[0] * dim
+        # nodes may carry more dofs than their displacement (a shell's rotations follow it)
+        self.dofs_per_node = dofs_per_node or dim
+        self.n_dofs = self.X.shape[0] * self.dofs_per_node
         groups: dict = {}
         for faces, p in loads:
             for name, f in faces.items():
@@ -81,7 +83,7 @@ class FollowerPressure:
         return True
 
     def _x(self, u, faces):
-        return self.X[faces] + np.asarray(u, float).reshape(-1, self.dim)[faces]
+        return self.X[faces] + np.asarray(u, float).reshape(-1, self.dofs_per_node)[:, :self.dim][faces]
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         """Global nodal forces (n_dofs,) at displacement u."""
@@ -91,6 +93,8 @@ class FollowerPressure:
             nA = normal_areas(self._x(u, faces), t)                          # (n, q, d)
             fe = -np.einsum("n,q,qa,nqd->nad", p, t.weights, t.N, nA)
             np.add.at(f, faces, fe)
+        if self.dofs_per_node != self.dim:
+            f = np.concatenate([f, np.zeros((len(f), self.dofs_per_node - self.dim))], axis=1)
         return f.ravel()
 
     def element_stiffness(self, u: np.ndarray) -> dict:
@@ -119,7 +123,7 @@ class FollowerPressure:
         key = (id(pattern), name)
         if key not in self._positions:
             d, n = self.dim, pattern.n_dofs
-            dofs = (faces[:, :, None] * d + np.arange(d)).reshape(len(faces), -1)
+            dofs = (faces[:, :, None] * self.dofs_per_node + np.arange(d)).reshape(len(faces), -1)
             keys = (dofs[:, :, None] * n + dofs[:, None, :]).ravel()
             csr_keys = pattern._rows.astype(np.int64) * n + pattern.indices.astype(np.int64)
             pos = np.searchsorted(csr_keys, keys)

@@ -110,7 +110,9 @@ class MeshSpec:
     size: tuple = (1.0, 0.2, 0.2)
     cells: tuple = (10, 2, 2)
     element: str = "hexahedron"          # tetra, tetra10, hexahedron, wedge, pyramid, mixed, triangle, triangle6, quad
-    origin: tuple = (0.0, 0.0, 0.0)
+    origin: tuple = (0.0, 0.0, 0.0)      # (shell: "shell" with generate = "plate" / "sphere", or a file's triangles)
+    radius: float = 0.5                  # generate = "sphere": radius of the icosphere ...
+    subdivisions: int = 3                # ... and its subdivisions (20 x 4^s triangles)
 
 
 @dataclass
@@ -335,7 +337,7 @@ class Scene:
 
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
         "amplitude")
-_MESH = ("generate", "file", "size", "cells", "element", "origin")
+_MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
@@ -362,7 +364,7 @@ _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days
 LINEAR_SOLVERS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 INVERSION_ACTIONS = ("warn", "stop")
 MASS_KINDS = ("lumped", "consistent")       # runtime/mass.py
-GENERATORS = ("bar",)
+GENERATORS = ("bar", "plate", "sphere")       # plate, sphere: shell surfaces (runtime.surfaces)
 ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
 ELEMENTS_2D = BAR_ELEMENTS[2]
 CELL_TYPES = _element_types.names()     # every registered element type (tensormass.elements)
@@ -534,16 +536,24 @@ class _Parser:
         if ("generate" in t) == ("file" in t):
             raise SceneError("mesh: give exactly one of generate = \"bar\" or file = \"...\"")
         if "file" in t:
-            extra = [k for k in ("size", "cells", "element", "origin") if k in t]
+            extra = [k for k in ("size", "cells", "origin", "radius", "subdivisions") if k in t]
             if extra:
                 raise SceneError(f"mesh.{extra[0]}: only used with generate = \"bar\", not with mesh.file")
+            element = None
+            if "element" in t:       # a file's triangles as shells: the only conversion there is
+                element = self.string(t["element"], "mesh.element", ("shell",))
             raw = self.string(t["file"], "mesh.file")
             path = Path(scene_path(raw, self.base_dir))
             if not path.is_file():
                 raise SceneError(f"mesh.file: mesh file not found: {path} (relative paths are relative to "
                                  "the scene file)")
-            return MeshSpec(generate=None, file=str(path))
-        self.string(t["generate"], "mesh.generate", GENERATORS)
+            return MeshSpec(generate=None, file=str(path), **({"element": element} if element else {}))
+        generator = self.string(t["generate"], "mesh.generate", GENERATORS)
+        if generator != "bar":
+            return self._surface(t, generator)
+        for k in ("radius", "subdivisions"):
+            if k in t:
+                raise SceneError(f"mesh.{k}: only used with generate = \"sphere\"")
         element = self.string(t["element"], "mesh.element", tuple(dict.fromkeys(ELEMENTS_3D + ELEMENTS_2D))) \
             if "element" in t else None
         if "size" in t:
@@ -575,6 +585,34 @@ class _Parser:
         _check_bar_extent(size, origin)
         return MeshSpec(generate="bar", file=None, size=size, cells=cells, element=element, origin=origin)
 
+    def _surface(self, t, generator) -> MeshSpec:
+        """generate = "plate" (size [a, b], cells [nx, ny], 2 triangles per cell, at z = 0) or
+        "sphere" (radius, subdivisions: an icosphere): shell triangles in 3D (runtime.surfaces)."""
+        element = self.string(t.get("element", "shell"), "mesh.element", ("shell",))
+        self.dim = 3
+        origin = self.vector(t["origin"], "mesh.origin", dim=3) if "origin" in t else (0.0, 0.0, 0.0)
+        if generator == "sphere":
+            for k in ("size", "cells"):
+                if k in t:
+                    raise SceneError(f"mesh.{k}: not used with generate = \"sphere\" (radius, subdivisions)")
+            radius = self.number(t.get("radius", 0.5), "mesh.radius", positive=True)
+            subdivisions = self.integer(t.get("subdivisions", 3), "mesh.subdivisions", 0)
+            if subdivisions > 7:
+                raise SceneError(f"mesh.subdivisions: at most 7 (20 x 4^7 = 327 680 triangles), got {subdivisions}")
+            return MeshSpec(generate="sphere", file=None, size=(), cells=(), element=element, origin=origin,
+                            radius=radius, subdivisions=subdivisions)
+        for k in ("radius", "subdivisions"):
+            if k in t:
+                raise SceneError(f"mesh.{k}: only used with generate = \"sphere\"")
+        size = self.vector(t.get("size", [1.0, 1.0]), "mesh.size", dim=2)
+        if min(size) <= 0:
+            raise SceneError(f"mesh.size: a plate takes 2 positive sizes [a, b], got {_fmt(list(size))}")
+        cells_raw = t.get("cells", [8, 8])
+        if not isinstance(cells_raw, list) or len(cells_raw) != 2:
+            raise SceneError(f"mesh.cells: a plate takes 2 integers [nx, ny], got {_fmt(cells_raw)}")
+        cells = tuple(self.integer(c, f"mesh.cells[{i}]", 1) for i, c in enumerate(cells_raw))
+        return MeshSpec(generate="plate", file=None, size=size, cells=cells, element=element, origin=origin)
+
     def material(self, t, key) -> Material:
         t = self.table(t, key)
         law_name = self.string(t.get("law", "stvk"), f"{key}.law")
@@ -582,7 +620,7 @@ class _Parser:
             law = laws.get(law_name)
         except laws.LawError as exc:
             raise SceneError(f"{key}.law: {exc}") from None
-        self.keys(t, key, _MATERIAL, law.parameters)
+        self.keys(t, key, _MATERIAL, tuple(law.parameters) + tuple(o for o, _, _ in getattr(law, "options", ())))
         region = t.get("region", "all")
         if isinstance(region, bool) or not isinstance(region, (str, int)):
             raise SceneError(f"{key}.region: expected \"all\", an element type, an integer cell tag or a "
@@ -597,8 +635,8 @@ class _Parser:
                              "or box = [[...], [...]]")
         box = self.box(t["box"], f"{key}.box") if "box" in t else None
         # a discrete law (springs, lattice cubes) has one kernel per element: quadrature "discrete"
-        quadrature = self.string(t.get("quadrature", "discrete" if law.kind == "discrete" else "gauss2"),
-                                 f"{key}.quadrature")
+        default = {"discrete": "discrete", "shell": "exact"}.get(law.kind, "gauss2")
+        quadrature = self.string(t.get("quadrature", default), f"{key}.quadrature")
         self._check_combination(key, region, law_name, quadrature)
         formulation = _formulation.formulation_name(t.get("formulation", "displacement"), f"{key}.formulation")
         if isinstance(region, str) and region in CELL_TYPES:    # validate() repeats it per cell type of the mesh
@@ -606,7 +644,7 @@ class _Parser:
         density = self.number(t.get("density", 1000.0), f"{key}.density")
         if density <= 0:
             raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
-        if law.kind == "discrete":
+        if law.kind in ("discrete", "shell"):
             return self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
         native = {p: self.number(t[p], f"{key}.{p}") for p in law.parameters if p in t}
         E = nu = None
@@ -642,7 +680,7 @@ class _Parser:
     def _discrete_material(self, t, key, law, region, box, quadrature, formulation, density) -> Material:
         """A discrete law's material: E and nu (what its stiffness rule converts) and its options (A)."""
         if formulation != "displacement":
-            raise SceneError(f"{key}.formulation: law {law.name!r} is a discrete model (springs), it has no "
+            raise SceneError(f"{key}.formulation: law {law.name!r} is a {law.kind} model, it has no "
                              f"locking-free formulation; remove formulation = {formulation!r}")
         for name in ("E", "nu"):
             if name not in t:

@@ -47,8 +47,8 @@ def load_mesh(scene):
         spec = scene.mesh
         key = "mesh.file" if spec.file is not None else "mesh"
         try:
-            if spec.file is not None:
-                mesh = _mesh.read_mesh(spec.file)
+            if spec.file is not None or spec.generate in SURFACES:
+                mesh = _mesh.read_mesh(spec.file) if spec.element != "shell" else shell_mesh(spec)
                 check_coordinates(mesh.points)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
             else:
@@ -76,9 +76,50 @@ def scene_mesh(scene):
     return build_mesh(scene.mesh)
 
 
+SURFACES = ("plate", "sphere")         # shell generators (runtime.surfaces)
+
+
+def shell_mesh(spec):
+    """The shell triangles of a MeshSpec with element = "shell": a generated plate (at z = 0) or
+    icosphere, or a file's triangles (3D points; other cells refused, unused points dropped)."""
+    from . import surfaces
+    if spec.generate == "plate":
+        points, triangles = surfaces.plate(spec.size[0], spec.size[1], spec.cells[0], spec.cells[1])
+    elif spec.generate == "sphere":
+        points, triangles = surfaces.icosphere(spec.radius, spec.subdivisions)
+    else:
+        points, triangles = _file_triangles(spec.file)
+    points = np.asarray(points, float) + np.asarray(spec.origin, float)[:3] if spec.file is None else points
+    return _mesh.Mesh(points, [_mesh.CellBlock("shell", np.asarray(triangles, dtype=np.int64))])
+
+
+def _file_triangles(path):
+    """(points (n, 3), triangles) of a surface mesh file: its triangle cells, renumbered."""
+    import meshio
+    try:
+        m = meshio.read(path)
+    except Exception as exc:
+        raise MeshError(f"could not read mesh {path}: {type(exc).__name__}: {exc}") from None
+    blocks = [np.asarray(cb.data, dtype=np.int64) for cb in m.cells if cb.type == "triangle"]
+    other = sorted({cb.type for cb in m.cells if cb.type not in ("triangle", "line", "vertex")})
+    if other:
+        raise MeshError(f"{path}: element = \"shell\" takes triangle cells only; the file also has "
+                        f"{', '.join(other)} (remove them or mesh the surface alone)")
+    if not blocks:
+        raise MeshError(f"{path}: element = \"shell\" needs triangle cells; the file has none")
+    triangles = np.vstack(blocks)
+    points = np.asarray(m.points, dtype=np.float64)
+    if points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    used, inverse = np.unique(triangles, return_inverse=True)
+    return points[used], inverse.reshape(triangles.shape)
+
+
 def build_mesh(spec):
     """Generate or read the mesh of a MeshSpec and check it."""
-    if spec.file:
+    if getattr(spec, "element", None) == "shell":
+        mesh = shell_mesh(spec)
+    elif spec.file:
         mesh = _mesh.read_mesh(spec.file)
     elif spec.generate in (None, "bar"):
         dim = 2 if spec.element in _element_types.names(dim=2) or len(spec.cells) == 2 else 3
