@@ -211,6 +211,8 @@ class _ShellBuilder(_DiscreteBuilder):
         out += [Declare(name, e) for name, e in rest.outputs]
         out.append(Assign(ref("D", 0), _s("v")))
         out.append(Flag(_s("v"), 1))                     # a degenerate triangle: zero area (or thickness)
+        # ... or collinear corners up to rounding: twice the area / l^2 (dimensionless) below 1e-12
+        out.append(Flag(_s("q_2") / _s("l_1") - sp.Float(1e-12), 1))
         out += [Declare(str(sym), e) for sym, e in ir.material.temporaries]
         out += [Assign(ref("D", ir.material_offset + k), e) for k, (_, e) in enumerate(ir.material.outputs)]
         return tuple(out)

@@ -213,7 +213,8 @@ def read_mesh(path) -> Mesh:
     if unknown:
         raise MeshError(f"{path}: unknown cell type(s) {', '.join(unknown)}")
     dim = max(dims.values(), default=-1)
-    solid = tuple(t for t in _types.names(dim=dim) if _types.get(t).solid)   # shells: [mesh] element = "shell"
+    # the types a file's cells are read as: a shell is a file's triangle read with [mesh] element = "shell"
+    solid = tuple(t for t in _types.names(dim=dim) if _types.get(t).file_type == t)
     if dim < 2 and not any(t in solid for t in dims):   # lower-dimensional cells of a registered type only
         raise MeshError(f"{path}: no 2D or 3D cells (found: {', '.join(sorted(dims)) or 'none'})")
     bad = sorted(t for t, d in dims.items() if d == dim and t not in solid)

@@ -410,6 +410,9 @@ class Model:
                 np.add.at(self._loaded(f), part.cells[rows], shares[:, :, None] * g)
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
+            if load.kind == "moment":
+                self._add_moment(f, load, force, i)
+                continue
             if getattr(load, "region", None) is not None:   # a mesh group (and box): runtime.regions
                 self._add_region_load(self._loaded(f), load, force, i)
                 continue
@@ -421,6 +424,15 @@ class Model:
             else:
                 raise TensormassError(f"loads.nodal[{i}].kind must be 'force' or 'traction', got {load.kind!r}")
         return f
+
+    def _add_moment(self, f, load, moment, i):
+        """A total moment split evenly over the selected nodes' rotation dofs (shells: dofs 3..5)."""
+        if self.dofs_per_node != 2 * self.dim:
+            raise TensormassError(f"loads.moment: the nodes carry no rotations ({self.dofs_per_node} dofs per node); "
+                                  "moments load shells (element = \"shell\")")
+        nodes = selection_nodes(self.mesh, load, f"loads.moment[{i}]", self.box_tol) \
+            if getattr(load, "region", None) is not None else self._nodes_in(load.box, f"loads.moment[{i}]")
+        f.reshape(self.n_points, self.dofs_per_node)[nodes, self.dim:] += moment / nodes.size
 
     def _add_traction(self, f, box, traction, i):
         """Traction per unit area on the boundary faces inside the box: f_a = int N_a t dA (consistent)."""

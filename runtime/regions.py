@@ -420,7 +420,10 @@ def prescribed_values(fixed, points, tol: float, components: int | None = None, 
             nodes = selection_nodes(mesh, f, f"fixed[{i}]", tol)
         else:
             nodes = np.flatnonzero(box_contains(f.box, points, tol))
-        disp = np.zeros(dim) if f.displacement is None else np.asarray(f.displacement, dtype=float)[:dim]
+        disp = np.zeros(dim)            # a shell's rotations (past the displacement) are held at zero
+        if f.displacement is not None:
+            given = np.asarray(f.displacement, dtype=float)[:dim]
+            disp[:given.size] = given
         for c in range(dim) if f.components is None else f.components:
             c = int(c)
             old = value[nodes, c]

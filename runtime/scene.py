@@ -155,6 +155,7 @@ class NodalLoad:
     box: tuple | None                     # force applied to the nodes inside the box (None: region only)
     force: tuple                          # total force, split evenly over those nodes
     kind: str = "force"                   # "force" (total, split over nodes) or "traction" (per unit area of boundary faces inside the box)
+    #                                       or "moment" (total moment in N m, split over the nodes: shells)
     amplitude: str | None = None          # [[amplitude]] name; None: ramp (static), constant (dynamic)
     region: str | int | None = None       # a mesh group (name or id): its nodes / boundary faces (with box: inside)
 
@@ -341,7 +342,7 @@ _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "su
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
-_LOADS = ("gravity", "force", "traction", "pressure", "gravity_amplitude")
+_LOADS = ("gravity", "force", "traction", "moment", "pressure", "gravity_amplitude")
 _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
@@ -547,6 +548,7 @@ class _Parser:
             if not path.is_file():
                 raise SceneError(f"mesh.file: mesh file not found: {path} (relative paths are relative to "
                                  "the scene file)")
+            self.shell = element == "shell"
             return MeshSpec(generate=None, file=str(path), **({"element": element} if element else {}))
         generator = self.string(t["generate"], "mesh.generate", GENERATORS)
         if generator != "bar":
@@ -589,7 +591,7 @@ class _Parser:
         """generate = "plate" (size [a, b], cells [nx, ny], 2 triangles per cell, at z = 0) or
         "sphere" (radius, subdivisions: an icosphere): shell triangles in 3D (runtime.surfaces)."""
         element = self.string(t.get("element", "shell"), "mesh.element", ("shell",))
-        self.dim = 3
+        self.dim, self.shell = 3, True
         origin = self.vector(t["origin"], "mesh.origin", dim=3) if "origin" in t else (0.0, 0.0, 0.0)
         if generator == "sphere":
             for k in ("size", "cells"):
@@ -724,9 +726,11 @@ class _Parser:
                 raise SceneError(f"{key}.components: expected a non-empty array of component indices")
             dim = bdim or 3
             comps = tuple(self.integer(c, f"{key}.components[{i}]", 0) for i, c in enumerate(raw))
-            if max(comps) >= dim:
+            if getattr(self, "shell", False) and max(comps) < 2 * dim:
+                pass                     # shells: 0..2 the displacement, 3..5 the rotation
+            elif max(comps) >= dim:
                 raise SceneError(f"{key}.components: component {max(comps)} does not exist in {dim}D "
-                                 f"(use 0..{dim - 1})")
+                                 f"(use 0..{dim - 1}; shells: 0..{2 * dim - 1}, 3..5 the rotations)")
             if len(set(comps)) != len(comps):
                 raise SceneError(f"{key}.components: repeated component in {list(comps)}")
         fixed = Fixed(box=box, displacement=disp, components=comps, region=region)
@@ -769,7 +773,7 @@ class _Parser:
         self.keys(t, "loads", _LOADS)
         gravity = self.vector(t["gravity"], "loads.gravity") if "gravity" in t else None
         nodal = []
-        for kind in ("force", "traction"):
+        for kind in ("force", "traction", "moment"):       # moment: shells (nodes with rotations)
             for i, lt in enumerate(self.tables(t.get(kind, []), f"loads.{kind}")):
                 key = f"loads.{kind}[{i}]"
                 self.keys(lt, key, _LOAD, _LOAD_OPTIONAL)

@@ -17,6 +17,7 @@ import numpy as np
 from .. import elements as _element_types
 from ..generator.catalogue import entries, quadratures
 from . import resources
+from .dofs import dofs_per_node as _dofs_per_node
 from .errors import SceneError, TensormassError
 from . import mesh as _mesh          # module attribute lookups: tests stand in for read_mesh, generate_bar
 from .mesh import MeshError, check_coordinates
@@ -184,13 +185,13 @@ def check_against_mesh(scene, mesh) -> None:
         if f.box is not None:
             vec(f.box[0], f"fixed[{i}].box")
         vec(f.displacement, f"fixed[{i}].displacement")
-        if f.components is not None and max(f.components) >= dim:
+        if f.components is not None and max(f.components) >= _dofs_per_node(mesh):
             raise SceneError(f"fixed[{i}].components: component {max(f.components)} does not exist in {dim}D")
         if getattr(f, "region", None) is not None:          # a mesh group (and box): runtime.regions
             selection_nodes(mesh, f, f"fixed[{i}]", tol)
         elif not box_contains(f.box, mesh.points, tol).any():
             raise SceneError(f"fixed[{i}].box: no mesh node inside{bounds}")
-    counters = {"force": 0, "traction": 0}
+    counters = {"force": 0, "traction": 0, "moment": 0}
     for load in scene.loads.nodal:
         key = f"loads.{load.kind}[{counters[load.kind]}]"
         counters[load.kind] += 1
@@ -212,7 +213,7 @@ def check_against_mesh(scene, mesh) -> None:
             selection_nodes(mesh, p, f"probe[{i}]", tol)
             continue
         vec(p.point, f"probe[{i}].point")
-    prescribed_values(scene.fixed, mesh.points, tol, mesh=mesh)
+    prescribed_values(scene.fixed, mesh.points, tol, _dofs_per_node(mesh), mesh=mesh)
     _check_probes(scene, mesh)
 
     # every cell needs a material, and every (cell type, law, quadrature) in use must exist

@@ -1018,7 +1018,7 @@ def _scene_cases() -> None:
     add("scene", "empty material array", err, r"material", changes={"material": []})
     add("scene", "empty [mesh] table", err, r"mesh", changes={"mesh": {}})
     add("scene", "generate and file both", err, r"mesh", changes={"mesh.file": "bar.vtu"})
-    add("scene", "generate unknown", err, r"mesh\.generate.*sphere", changes={"mesh.generate": "sphere"})
+    add("scene", "generate unknown", err, r"mesh\.generate.*torus", changes={"mesh.generate": "torus"})
     add("scene", "mesh file does not exist", err, r"(?i)not found.*nowhere\.vtu",
         changes={"mesh": {"file": "nowhere.vtu"}})
     add("scene", "mesh file is a folder", err, r"mesh", changes={"mesh": {"file": "meshes"}},

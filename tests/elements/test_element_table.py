@@ -15,12 +15,13 @@ from tensormass.generator.quadrature import rule
 from tensormass.runtime import mesh as M
 from tensormass.runtime.mesh import CellBlock, Mesh, MeshError, check_mesh, orient_cells, read_mesh
 
-BUILTIN = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
+SOLIDS = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
+BUILTIN = SOLIDS + ("shell",)         # shell: a triangle with 6 dofs per node (elements/shell.py)
 FACE_NODES = {"vertex": 1, "line": 2, "line3": 3, "triangle": 3, "triangle6": 6, "quad": 4}
 
 # What runtime/mesh.py, runtime/adapt.py and generator/elements.py restated before the table.
 OLD_NODES = {"tetra": 4, "tetra10": 10, "hexahedron": 8, "wedge": 6, "pyramid": 5,
-             "triangle": 3, "triangle6": 6, "quad": 4}
+             "triangle": 3, "triangle6": 6, "quad": 4, "shell": 3}
 OLD_CORNERS = {"tetra": 4, "tetra10": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5,
                "triangle": 3, "triangle6": 3, "quad": 4}
 OLD_FACES = {
@@ -67,7 +68,9 @@ def _ref(t):
 def test_registry_names_and_lookups():
     assert elements.names() == BUILTIN == elements.builtin()
     assert elements.names(dim=3) == ("tetra", "tetra10", "hexahedron", "wedge", "pyramid") == M.SOLID_TYPES_3D
-    assert elements.names(dim=2) == ("triangle", "triangle6", "quad") == M.SOLID_TYPES_2D
+    assert elements.names(dim=2) == ("triangle", "triangle6", "quad", "shell")
+    assert M.SOLID_TYPES_2D == ("triangle", "triangle6", "quad")          # a shell is no 2D solid
+    assert not elements.get("shell").solid and elements.get("shell").dofs_per_node == 6
     assert [t.name for t in elements.by_dim(2)] == list(elements.names(dim=2))
     assert M.NODES_PER_CELL == OLD_NODES
     with pytest.raises(ValueError, match="unknown element type 'hexahedron27'"):
@@ -86,7 +89,7 @@ def test_element_types_are_frozen():
 # --------------------------------------------------------------------------- consistency
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_counts_equal_what_mesh_and_generator_used(name):
     t = elements.get(name)
     assert t.n_nodes == OLD_NODES[name] == element(name).n_nodes
@@ -101,7 +104,7 @@ def test_counts_equal_what_mesh_and_generator_used(name):
     assert elements.get(t.linear).order == 1 and elements.get(t.linear).n_nodes == t.n_corners
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_faces_and_edges_are_made_of_the_element(name):
     t = elements.get(name)
     edges = {frozenset(e) for e in t.edges}
@@ -121,7 +124,7 @@ def test_faces_and_edges_are_made_of_the_element(name):
         assert t.n_corners - len(t.edges) + len(t.faces) == 2
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_faces_point_outward(name):
     t = elements.get(name)
     X = _ref(t)
@@ -136,7 +139,7 @@ def test_faces_point_outward(name):
         assert n @ (V.mean(axis=0) - centre) > 0, f
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_midsides_at_edge_midpoints(name):
     t = elements.get(name)
     assert t.quadratic == (t.order == 2) == (t.n_nodes > t.n_corners)
@@ -147,7 +150,7 @@ def test_midsides_at_edge_midpoints(name):
     assert {frozenset(e) for e in t.midside_edges} <= {frozenset(e) for e in t.edges}
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_regular_measures(name):
     from scipy.spatial import ConvexHull
 
@@ -161,7 +164,7 @@ def test_regular_measures(name):
     assert np.all(M._sample_dets(P, blk) > 0)
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_flip_mirrors_the_reference_element(name):
     t = elements.get(name)
     X = _ref(t)
@@ -170,7 +173,7 @@ def test_flip_mirrors_the_reference_element(name):
     assert np.all(ok > 0) and np.all(flipped < 0)
 
 
-@pytest.mark.parametrize("name", [n for n in BUILTIN if n != "pyramid"])
+@pytest.mark.parametrize("name", [n for n in SOLIDS if n != "pyramid"])
 def test_numeric_lagrange_gradients_match_the_closed_forms(name):
     """The fallback a new element type (hexahedron27, wedge15, ...) gets its mesh-check tables from."""
     t = elements.get(name)
@@ -179,7 +182,7 @@ def test_numeric_lagrange_gradients_match_the_closed_forms(name):
         np.testing.assert_allclose(M._grad_lagrange(t, x), M._gradient_table(t)[q], atol=1e-12)
 
 
-@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("name", SOLIDS)
 def test_generator_nodes_and_kind_come_from_the_table(name):
     t, ref = elements.get(name), ELEMENTS[name]
     assert ref.type is t and ref.nodes == tuple(tuple(sp.sympify(c) for c in p) for p in t.nodes)

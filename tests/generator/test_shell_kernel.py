@@ -174,14 +174,8 @@ def test_exactly_degenerate_triangles_are_flagged(k):
         k.constants(X, E=E, nu=NU, thickness=H)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "constants() flags only v = l q h / 2 that is not > 0, with q = |d1 x d2| / l unsigned: corners "
-    "collinear in a general 3D position leave a rounding residue |d1 x d2| ~ 1e-16 l^2 (v ~ 1e-18, "
-    "K ~ 1e19 x a normal element's, no flag: numba flags 29 of 200 such triangles, those whose "
-    "residue happens to be exactly 0; C flags none). Even two bitwise-equal corners pass on the C "
-    "backend built with the loader's -O3 -march=native (GCC 12.2; v ~ 5e-20; -O2 or "
-    "-fno-tree-slp-vectorize give 0 and the flag). A relative test (e.g. |d1 x d2| <= 1e-12 x the "
-    "largest squared edge) would catch them"))
+# constants() also flags corners collinear up to rounding (twice the area / l^2 below 1e-12): the
+# rounding residue of |d1 x d2| in a general 3D position is ~1e-16 l^2, far from zero otherwise
 def test_collinear_triangles_in_general_position_are_flagged(k):
     X = random_triangles(8, seed=13)
     for e, s in enumerate(np.linspace(-0.5, 1.5, 8)):
