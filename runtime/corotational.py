@@ -25,7 +25,7 @@ a strip rolled into a full circle is out of reach, half a circle is not.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 __all__ = ["CorotationalShell", "rest_frames", "rotation_matrices"]
 
@@ -116,9 +116,11 @@ def _element(De, Xe, ue):
     return ub, Re, True
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _evaluate(D, X, u, want_f, want_K, f, K, W, flags):
-    for e in range(D.shape[0]):
+    # elements in parallel (runtime.parallel's thread count): each writes only its own rows, so
+    # the results are the same bits whatever the count; the assembler scatters them in order
+    for e in prange(D.shape[0]):
         ub, Re, ok = _element(D[e], X[e], u[e])
         if not ok:
             flags[e] = 1
@@ -137,8 +139,8 @@ def _evaluate(D, X, u, want_f, want_K, f, K, W, flags):
             # T_e K_bar T_e^T block by block (3 x 3 blocks of translations / rotations)
             for b in range(2 * N):
                 for c in range(2 * N):
-                    blk = Kb[3 * b:3 * b + 3, 3 * c:3 * c + 3]
-                    out = Re @ blk @ Re.T
+                    blk = np.ascontiguousarray(Kb[3 * b:3 * b + 3, 3 * c:3 * c + 3])
+                    out = Re @ blk @ np.ascontiguousarray(Re.T)
                     for r in range(3):
                         for s in range(3):
                             K[e, 3 * b + r, 3 * c + s] = out[r, s]

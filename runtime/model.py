@@ -212,6 +212,7 @@ class Model:
         self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
         self.f_ext = self._external_forces()
         self.pressure = self._pressure_loads()    # runtime.pressure.FollowerPressure or None
+        self.volume_constraint = self._volume_constraint()   # (VolumeConstraint, free node mask) or None
         # prescribed displacements and loads over time: amplitudes, rigid motions (runtime.motion)
         self.amplitudes = list(amplitudes)
         self.motion = Motion(self, list(fixed), self.amplitudes)
@@ -383,7 +384,9 @@ class Model:
             if comps.size == 0 or comps.min() < 0 or comps.max() >= n:
                 raise TensormassError(f"fixed[{i}].components must be in 0..{n - 1}, got {fx.components!r}")
             if fx.displacement is not None:
-                self._vector(fx.displacement, f"fixed[{i}].displacement", max(self.n_load, int(comps.max()) + 1))
+                # shells: the displacement's 3 components; their prescribed rotations are zero
+                need = self.n_load if self.dofs_per_node > self.dim else max(self.n_load, int(comps.max()) + 1)
+                self._vector(fx.displacement, f"fixed[{i}].displacement", need)
         # entries that give one dof different values are refused there (the order would decide)
         value, self.fixed_owner = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node,
                                                     mesh=self.mesh)
@@ -469,6 +472,25 @@ class Model:
         # open surfaces: the full (non-symmetric) stiffness unless CG (symmetric only) solves
         pressure.symmetric = pressure.closed or self.solver.linear in ("cg", "amg")
         return pressure
+
+    def _volume_constraint(self):
+        """solver.preserve_volume: the closed shell surface's exact volume projection
+        (runtime.volume_constraint), with the nodes whose displacement is prescribed left in place."""
+        if not getattr(self.solver, "preserve_volume", False):
+            return None
+        if not self.shells:
+            raise TensormassError("solver.preserve_volume: needs a closed shell surface (element = \"shell\"); "
+                                  "a solid keeps its volume through its law (nu -> 0.5, a formulation)")
+        from .volume_constraint import VolumeConstraint
+        cells = np.vstack([b.cells for b in self.mesh.blocks if b.type == "shell"])
+        try:
+            constraint = VolumeConstraint(cells, self.mesh.points)
+        except ValueError as exc:
+            raise TensormassError(f"solver.preserve_volume: {exc}") from None
+        held = np.zeros((self.n_points, self.dofs_per_node), dtype=bool)
+        held.reshape(-1)[self.fixed_dofs] = True
+        free = (~held[:, :self.dim]).astype(float)           # per node and component: 0 where prescribed
+        return constraint, free
 
     @property
     def shells(self) -> bool:

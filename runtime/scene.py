@@ -196,6 +196,7 @@ class Solver:
     on_inversion: str = "warn"            # inverted elements (laws defined there): "warn" (invalid at the end) | "stop"
     mass: str = "lumped"                  # lumped (row sums / HRZ) | consistent (implicit solvers; runtime/mass.py)
     threads: int | None = None            # assembly threads (runtime/parallel.py); None: $TENSORMASS_THREADS / every core
+    preserve_volume: bool = False         # closed shells: project onto the rest volume after every step
 
 
 @dataclass
@@ -347,7 +348,7 @@ _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
-           "max_displacement", "on_inversion", "mass", "rho_inf", "threads")
+           "max_displacement", "on_inversion", "mass", "rho_inf", "threads", "preserve_volume")
 _PROBE = ("name", "point", "region", "box")
 _OUTPUT = ("dir", "every", "fields", "picture", "plot")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
@@ -831,6 +832,8 @@ class _Parser:
             s.backend = self.string(t["backend"], "solver.backend", BACKENDS)
         if "health_monitor" in t:
             s.health_monitor = self.boolean(t["health_monitor"], "solver.health_monitor")
+        if "preserve_volume" in t:
+            s.preserve_volume = self.boolean(t["preserve_volume"], "solver.preserve_volume")
         for k in ("max_energy_growth", "max_displacement"):
             if k in t:
                 setattr(s, k, self.number(t[k], f"solver.{k}", positive=True))

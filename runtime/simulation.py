@@ -293,6 +293,8 @@ class Simulation:
             t0 = time.perf_counter()
             linear = self.ctx.linear_iterations
             info = integ.step(k)
+            if model.volume_constraint is not None:
+                self._preserve_volume(model)
             if self.adapter is not None:
                 self._adapt(k)
                 integ, model = self.integrator, self.model      # refinement rebuilds both
@@ -320,6 +322,22 @@ class Simulation:
                     self.on_step(self)
                 except Exception as exc:
                     raise _CallbackFailed(exc) from exc
+
+    def _preserve_volume(self, model) -> None:
+        """Project the closed shell back onto its rest volume (positions only, along the vertex
+        normals, prescribed nodes held; runtime.volume_constraint) and keep the worst relative
+        volume error seen after a projection in self.volume_error."""
+        constraint, free = model.volume_constraint
+        U = self.ctx.u.reshape(model.n_points, model.dofs_per_node)
+        x = model.mesh.points + U[:, :model.dim]
+        from .volume_constraint import VolumeConstraintError
+        try:
+            x_new, _ = constraint.project(x, free=free)
+        except VolumeConstraintError as exc:
+            raise TensormassError(f"solver.preserve_volume: {exc}") from None
+        U[:, :model.dim] += x_new - x
+        error = abs(constraint.volume(model.mesh.points + U[:, :model.dim]) / constraint.rest_volume - 1.0)
+        self.volume_error = max(getattr(self, "volume_error", 0.0), error)
 
     def _hint(self, k: int) -> str:
         """What the integrator can say about a divergence (explicit: dt against the stable step)."""

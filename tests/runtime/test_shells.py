@@ -163,3 +163,74 @@ kind = "static"
     with pytest.raises(SceneError, match="mesh.size"):
         Scene.from_string(base.format(extra="thickness = 0.01", fixed="").replace("size = [1.0, 1.0]",
                                                                                   "size = [1.0, 1.0, 1.0]"))
+
+
+def squeezed_ball(preserve: bool, steps: int = 8) -> str:
+    return f"""
+name = "ball"
+[mesh]
+generate = "sphere"
+radius = 1.0
+subdivisions = 2
+[[material]]
+law = "cst_dkt"
+E = 3000.0
+nu = 0.49
+thickness = 0.1
+density = 100.0
+[[fixed]]
+box = [[-2, -2, -2], [2, 2, -0.9]]
+[[fixed]]
+box = [[-2, -2, 0.9], [2, 2, 2]]
+displacement = [0.0, 0.0, -0.4]
+[solver]
+kind = "implicit_euler"
+dt = 0.02
+steps = {steps}
+backend = "c"
+preserve_volume = {str(preserve).lower()}
+"""
+
+
+def test_volume_constraint_keeps_a_squeezed_ball_at_its_rest_volume_after_every_step():
+    from tensormass.runtime.volume_constraint import VolumeConstraint
+    volumes = {}
+    for preserve in (False, True):
+        scene = Scene.from_string(squeezed_ball(preserve))
+        seen = []
+
+        def record(sim):
+            m = sim.model
+            U = sim.ctx.u.reshape(m.n_points, 6)
+            vc = VolumeConstraint(m.mesh.blocks[0].cells, m.mesh.points)
+            seen.append(vc.volume(m.mesh.points + U[:, :3]) / vc.rest_volume - 1.0)
+
+        summary = Simulation(scene, on_step=record).run()
+        assert summary.status == "ok", summary.message
+        volumes[preserve] = np.array(seen)
+    assert np.abs(volumes[True]).max() <= 1e-8               # the issue's bound, after every step
+    assert volumes[False].min() < -0.01                      # without it the squeezed ball loses volume
+
+
+def test_volume_constraint_needs_a_closed_shell():
+    text = squeezed_ball(True).replace('generate = "sphere"\nradius = 1.0\nsubdivisions = 2',
+                                       'generate = "plate"\nsize = [1.0, 1.0]\ncells = [2, 2]')
+    text = text.replace("[[fixed]]\nbox = [[-2, -2, 0.9], [2, 2, 2]]\ndisplacement = [0.0, 0.0, -0.4]\n", "")
+    text = text.replace("box = [[-2, -2, -2], [2, 2, -0.9]]", "box = [[-1, -1, -1], [1e-9, 2, 1]]")
+    with pytest.raises(Exception, match="preserve_volume"):
+        Simulation(Scene.from_string(text)).run()
+
+
+def test_corotational_results_do_not_depend_on_the_thread_count():
+    from tensormass.runtime import parallel
+    lin = tm.load_kernel("shell", "cst_dkt", "exact", backend="c")
+    k = CorotationalShell(lin)
+    rng = np.random.default_rng(9)
+    X = rng.standard_normal((64, 3, 3))
+    D = k.constants(X, E=E, nu=NU, thickness=H)
+    u = 0.1 * rng.standard_normal((64, 3, 6))
+    with parallel.threads(1):
+        f1, K1 = k.forces_and_stiffness(D, u)
+    with parallel.threads(parallel.available()):
+        f2, K2 = k.forces_and_stiffness(D, u)
+    assert np.array_equal(f1, f2) and np.array_equal(K1, K2)
