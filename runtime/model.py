@@ -385,7 +385,7 @@ class Model:
                 raise TensormassError(f"fixed[{i}].components must be in 0..{n - 1}, got {fx.components!r}")
             if fx.displacement is not None:
                 # shells: the displacement's 3 components; their prescribed rotations are zero
-                need = self.n_load if self.dofs_per_node > self.dim else max(self.n_load, int(comps.max()) + 1)
+                need = self.n_load if self.shells else max(self.n_load, int(comps.max()) + 1)
                 self._vector(fx.displacement, f"fixed[{i}].displacement", need)
         # entries that give one dof different values are refused there (the order would decide)
         value, self.fixed_owner = prescribed_values(fixed, self.mesh.points, self.box_tol, self.dofs_per_node,

@@ -683,7 +683,8 @@ class _Parser:
     def _discrete_material(self, t, key, law, region, box, quadrature, formulation, density) -> Material:
         """A discrete law's material: E and nu (what its stiffness rule converts) and its options (A)."""
         if formulation != "displacement":
-            raise SceneError(f"{key}.formulation: law {law.name!r} is a {law.kind} model, it has no "
+            what = {"discrete": "discrete model (springs)", "shell": "shell model"}.get(law.kind, law.kind)
+            raise SceneError(f"{key}.formulation: law {law.name!r} is a {what}, it has no "
                              f"locking-free formulation; remove formulation = {formulation!r}")
         for name in ("E", "nu"):
             if name not in t:

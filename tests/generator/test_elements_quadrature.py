@@ -93,7 +93,8 @@ def up_to(dim, degree):
 
 # ------------------------------------------------------------ elements
 def test_catalogue():
-    assert list(ELEMENTS) == NAMES
+    # the solids, and the shell triangle (6 dofs per node: generator/shell.py, no solid kernels)
+    assert [n for n in ELEMENTS if n != "shell"] == NAMES and "shell" in ELEMENTS
     for name in NAMES:
         el = element(name)
         assert el.name == name and el.n_nodes == len(el.shape_functions) == len(el.nodes)

@@ -158,7 +158,7 @@ def test_generate_bar_rejects_bad_input():
 
 # ---------------------------------------------------------------- reference cells and faces
 
-@pytest.mark.parametrize("cell_type", sorted(NODES_PER_CELL))
+@pytest.mark.parametrize("cell_type", sorted(SOLID_TYPES_3D + SOLID_TYPES_2D))
 def test_reference_cell_is_valid_and_faces_point_outward(cell_type):
     corners = np.array(REF[cell_type], float)
     if cell_type == "tetra10":
@@ -448,4 +448,4 @@ def test_read_surface_only_mesh_in_3d_is_rejected(tmp_path):
 
 
 def test_type_lists():
-    assert set(SOLID_TYPES_3D) | set(SOLID_TYPES_2D) == set(NODES_PER_CELL)
+    assert set(SOLID_TYPES_3D) | set(SOLID_TYPES_2D) | {"shell"} == set(NODES_PER_CELL)

@@ -47,7 +47,8 @@ def test_every_supported_cell_type_has_a_fixture():
     seen = set()
     for path in FILES:
         seen.update(read_mesh(path).cell_types())
-    assert set(elements.builtin()) <= seen, f"no gmsh fixture for {set(elements.builtin()) - seen}"
+    solids = {n for n in elements.builtin() if elements.get(n).solid}      # a shell is a file's triangle
+    assert solids <= seen, f"no gmsh fixture for {solids - seen}"
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
