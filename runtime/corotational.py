@@ -93,27 +93,37 @@ def _frame(x):
 
 
 @njit(cache=True)
-def _element(De, Xe, ue):
-    """(u_bar (18,), R_e (3, 3), ok) of one element: rest X (3, 3), dofs u (3, 6)."""
-    Rest = De[R0:R0 + 9].reshape(3, 3)
-    Xb = De[XB:XB + 9].reshape(3, 3)
+def _element(De, Xe, ue, ub, Re):
+    """u_bar (18,) and R_e (3, 3) of one element into ub, Re: rest X (3, 3), dofs u (3, 6); False
+    when the current triangle is degenerate.  Explicit 3 x 3 loops: numba's @ on tiny matrices
+    calls BLAS, whose overhead would dominate."""
     x = Xe + ue[:, :3]
-    Re, ok = _frame(x)
-    ub = np.zeros(NDOF)
+    F, ok = _frame(x)
     if not ok:
-        return ub, Re, False
+        return False
+    Re[:, :] = F
+    rel = np.empty((3, 3))
     for i in range(N):
         for a in range(3):
             s = 0.0
             for k in range(3):
                 s += Re[k, a] * (x[i, k] - x[0, k])
-            ub[i * P + a] = s - Xb[i, a]
+            ub[i * P + a] = s - De[XB + 3 * i + a]
         Ri = _exp(ue[i, 3:].copy())
-        rel = Re.T @ Ri @ Rest
+        # rel = R_e^T R_i R_0
+        for a in range(3):
+            for b in range(3):
+                s = 0.0
+                for k in range(3):
+                    t = 0.0
+                    for m in range(3):
+                        t += Ri[k, m] * De[R0 + 3 * m + b]
+                    s += Re[k, a] * t
+                rel[a, b] = s
         th = _log(rel)
         for a in range(3):
             ub[i * P + 3 + a] = th[a]
-    return ub, Re, True
+    return True
 
 
 @njit(cache=True, parallel=True)
@@ -121,13 +131,20 @@ def _evaluate(D, X, u, want_f, want_K, f, K, W, flags):
     # elements in parallel (runtime.parallel's thread count): each writes only its own rows, so
     # the results are the same bits whatever the count; the assembler scatters them in order
     for e in prange(D.shape[0]):
-        ub, Re, ok = _element(D[e], X[e], u[e])
-        if not ok:
+        ub, Re = np.zeros(NDOF), np.zeros((3, 3))
+        if not _element(D[e], X[e], u[e], ub, Re):
             flags[e] = 1
             continue
-        Kb = D[e, KB:KB + NDOF * NDOF].reshape(NDOF, NDOF)
-        fb = Kb @ ub
-        W[e] = 0.5 * (ub @ fb)
+        fb = np.zeros(NDOF)
+        for r in range(NDOF):
+            s = 0.0
+            for c in range(NDOF):
+                s += D[e, KB + r * NDOF + c] * ub[c]
+            fb[r] = s
+        w = 0.0
+        for r in range(NDOF):
+            w += ub[r] * fb[r]
+        W[e] = 0.5 * w
         if want_f:
             for b in range(2 * N):
                 for k in range(3):
@@ -139,11 +156,16 @@ def _evaluate(D, X, u, want_f, want_K, f, K, W, flags):
             # T_e K_bar T_e^T block by block (3 x 3 blocks of translations / rotations)
             for b in range(2 * N):
                 for c in range(2 * N):
-                    blk = np.ascontiguousarray(Kb[3 * b:3 * b + 3, 3 * c:3 * c + 3])
-                    out = Re @ blk @ np.ascontiguousarray(Re.T)
+                    base = KB + 3 * b * NDOF + 3 * c
                     for r in range(3):
-                        for s in range(3):
-                            K[e, 3 * b + r, 3 * c + s] = out[r, s]
+                        for q in range(3):
+                            s = 0.0
+                            for a in range(3):
+                                t = 0.0
+                                for d in range(3):
+                                    t += D[e, base + a * NDOF + d] * Re[q, d]
+                                s += Re[r, a] * t
+                            K[e, 3 * b + r, 3 * c + q] = s
 
 
 class CorotationalShell:
