@@ -282,8 +282,12 @@ class _Integrator:
         return self.model.motion.displacement(fraction)
 
     def external_force(self, fraction: float) -> np.ndarray:
-        """External loads at run fraction s (static default: s f_ext; dynamic default: f_ext; amplitudes)."""
-        return self.model.motion.forces(fraction)
+        """External loads at run fraction s (static default: s f_ext; dynamic default: f_ext; amplitudes).
+        Follower pressures with amplitudes take their values at s here too (before forces(u) is asked)."""
+        pressure, motion = getattr(self.model, "pressure", None), self.model.motion
+        if pressure is not None and getattr(pressure, "amplitude_names", None):
+            pressure.set_factors({n: motion.factor(n, fraction, load=True) for n in pressure.amplitude_names})
+        return motion.forces(fraction)
 
 
 class Static(_Integrator):

@@ -465,7 +465,11 @@ class Model:
             if not faces:
                 where = f"in region {load.region!r}" if getattr(load, "region", None) is not None else f"inside box {load.box!r}"
                 raise TensormassError(f"loads.pressure[{i}]: no boundary face {where}")
-            loads.append((faces, value))
+            amplitude = getattr(load, "amplitude", None)
+            if amplitude is not None and self.solver.kind == "static":
+                raise TensormassError(f"loads.pressure[{i}].amplitude: a static run ramps its pressures with the load "
+                                      "factor; amplitudes over time need a dynamic solver.kind")
+            loads.append((faces, value, amplitude))
         if not loads:
             return None
         pressure = FollowerPressure(self.mesh.points, loads, self.dim, self.dofs_per_node)

@@ -47,14 +47,20 @@ class FollowerPressure:
         self.dofs_per_node = dofs_per_node or dim
         self.n_dofs = self.X.shape[0] * self.dofs_per_node
         groups: dict = {}
-        for faces, p in loads:
+        # loads: (faces, p) or (faces, p, amplitude name): an amplitude scales that load over time
+        self.amplitude_names = sorted({entry[2] for entry in loads if len(entry) > 2 and entry[2] is not None})
+        for entry in loads:
+            faces, p = entry[0], entry[1]
+            which = self.amplitude_names.index(entry[2]) + 1 if len(entry) > 2 and entry[2] is not None else 0
             for name, f in faces.items():
                 f = np.asarray(f, dtype=np.int64)
                 if f.size:
-                    groups.setdefault(name, []).append((f, np.full(len(f), float(p))))
-        # {face type: (faces (n, k), p (n,))}
-        self.groups = {name: (np.vstack([f for f, _ in v]), np.concatenate([p for _, p in v]))
+                    groups.setdefault(name, []).append((f, np.full(len(f), float(p)), np.full(len(f), which)))
+        # {face type: (faces (n, k), p (n,))}; p = the base value x its amplitude's factor now
+        self.groups = {name: (np.vstack([f for f, _, _ in v]), np.concatenate([p for _, p, _ in v]))
                        for name, v in sorted(groups.items())}
+        self._base = {name: (g[1].copy(), np.concatenate([w for _, _, w in groups[name]]))
+                      for name, g in self.groups.items()}
         if not self.groups:
             raise TensormassError("pressure: no faces")
         self._positions = {}
@@ -81,6 +87,14 @@ class FollowerPressure:
 
     def __bool__(self):
         return True
+
+    def set_factors(self, factors: dict) -> None:
+        """Scale each load by its amplitude's value now ({amplitude name: factor}; loads without
+        one keep their value): the integrators call it with the step's time (runtime.integrators)."""
+        scale = np.array([1.0] + [float(factors[n]) for n in self.amplitude_names])
+        for name, (faces, p) in self.groups.items():
+            base, which = self._base[name]
+            p[:] = base * scale[which]
 
     def _x(self, u, faces):
         return self.X[faces] + np.asarray(u, float).reshape(-1, self.dofs_per_node)[:, :self.dim][faces]

@@ -165,6 +165,7 @@ class PressureLoad:
     box: tuple | None                     # boundary faces whose nodes all lie inside the box (None: region only)
     value: float                          # Pa, normal to the current surface; > 0 pushes inward
     region: str | int | None = None       # a mesh group (name or id): its boundary faces (with box: inside)
+    amplitude: str | None = None          # [[amplitude]] name scaling it over time (dynamic runs)
 
 
 @dataclass
@@ -791,13 +792,15 @@ class _Parser:
         pressure = []
         for i, lt in enumerate(self.tables(t.get("pressure", []), "loads.pressure")):
             key = f"loads.pressure[{i}]"
-            self.keys(lt, key, _LOAD)
+            self.keys(lt, key, _LOAD, _LOAD_OPTIONAL)
             for k in ("box", "value"):
                 if k not in lt and not (k == "box" and "region" in lt):
                     raise SceneError(f"{key}.{k}: missing" + (" (or give region = \"<group>\")" if k == "box" else ""))
             pressure.append(PressureLoad(box=self.box(lt["box"], f"{key}.box") if "box" in lt else None,
                                          value=self.number(lt["value"], f"{key}.value"),
                                          region=self.region(lt["region"], f"{key}.region") if "region" in lt else None))
+            if "amplitude" in lt:
+                pressure[-1].amplitude = self.string(lt["amplitude"], f"{key}.amplitude")
         if gravity is None:
             gravity = (0.0,) * (self.dim or 3)
         out = Loads(gravity=gravity, nodal=nodal, pressure=pressure)

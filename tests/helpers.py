@@ -47,10 +47,22 @@ def random_cubes(n: int, seed: int = 0, edge=(0.3, 2.0)) -> np.ndarray:
     return out
 
 
+def catalogue_parameters(law: str) -> dict:
+    """Material parameters every catalogue entry of `law` accepts (a shell needs its thickness)."""
+    from tensormass import laws
+    return {"E": 2.0, "nu": 0.3, **({"thickness": 0.1} if laws.is_shell(law) else {})}
+
+
 def catalogue_elements(element: str, law: str, quadrature: str, n: int, seed: int = 0) -> np.ndarray:
     """Random rest elements a catalogue entry accepts: cubes for the lattice (discrete) laws on
     hexahedra, straight edges for quadrature 'exact', random curved elements otherwise."""
     from tensormass import laws
     if laws.is_discrete(law) and element == "hexahedron":
         return random_cubes(n, seed=seed)
+    if element == "shell":                  # triangles in 3D: a random 2D one, tilted and moved
+        rng = np.random.default_rng(seed)
+        flat = random_elements("triangle", n, seed=seed, straight=True)
+        X = np.concatenate([flat, np.zeros((n, 3, 1))], axis=2)
+        Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        return X @ Q.T + rng.standard_normal(3)
     return random_elements(element, n, seed=seed, straight=quadrature == "exact")

@@ -16,7 +16,7 @@ from tensormass import laws
 from tensormass.generator.catalogue import catalogue
 from tensormass.generator.ir import law_degree
 
-from helpers import catalogue_elements, random_elements, relative_error
+from helpers import catalogue_elements, catalogue_parameters, random_elements, relative_error
 
 ALL = catalogue()
 SAMPLE = [e for e in ALL if e.name in {
@@ -31,8 +31,9 @@ def test_c_equals_numba(entry):
     numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
     c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
     X = catalogue_elements(entry.element, entry.law, entry.quadrature, 11, seed=3)                                  # 2 blocks of 4 + 3
-    D = numba.constants(X, E=2.0, nu=0.3)
-    assert relative_error(c.constants(X, E=2.0, nu=0.3), D) < 1e-12
+    params = catalogue_parameters(entry.law)
+    D = numba.constants(X, **params)
+    assert relative_error(c.constants(X, **params), D) < 1e-12
     u = 0.04 * np.random.default_rng(1).standard_normal((len(X), numba.n_dofs))
     fn, Kn = numba.forces_and_stiffness(D, u)
     fc, Kc = c.forces_and_stiffness(D, u)
@@ -76,9 +77,9 @@ def test_fused_scatter_c_equals_numba(entry):
     from tensormass.runtime.fused import block_positions
     numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
     c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
-    n, k, d = 11, numba.n_nodes, numba.dim                                # 2 blocks of 4 + 3
+    n, k, d = 11, numba.n_nodes, numba.dofs_per_node                      # 2 blocks of 4 + 3
     X = catalogue_elements(entry.element, entry.law, entry.quadrature, n, seed=4)
-    D = numba.constants(X, E=2.0, nu=0.3)
+    D = numba.constants(X, **catalogue_parameters(entry.law))
     rng = np.random.default_rng(5)
     n_points = 2 * k
     cells = np.array([rng.permutation(n_points)[:k] for _ in range(n)], dtype=np.int64)   # shared nodes

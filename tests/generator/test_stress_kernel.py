@@ -17,7 +17,7 @@ import tensormass as tm
 from tensormass.generator.catalogue import entries
 from tensormass.generator.kernel_body import stress_record
 
-from helpers import catalogue_elements, relative_error
+from helpers import catalogue_elements, catalogue_parameters, relative_error
 
 # 3D and 2D, linear and quadratic, three laws; all compiled by test_backends_agree already.
 # CI's regeneration step (TENSORMASS_ALL_BACKENDS=1) compares C and numba on every entry.
@@ -29,8 +29,8 @@ SELECTED = ([(e.element, e.law, e.quadrature) for e in entries()]
 
 def _state(kernel, n=11, seed=3):
     X = catalogue_elements(kernel.element, kernel.law, kernel.quadrature, n, seed=seed)
-    D = kernel.constants(X, E=2.0, nu=0.3)
-    u = 0.04 * np.random.default_rng(seed).standard_normal((n, kernel.n_nodes, kernel.dim))
+    D = kernel.constants(X, **catalogue_parameters(kernel.law))
+    u = 0.04 * np.random.default_rng(seed).standard_normal((n, kernel.n_nodes, kernel.dofs_per_node))
     return D, u
 
 

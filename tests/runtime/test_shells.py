@@ -297,3 +297,32 @@ def test_pinched_hemisphere_against_its_published_reference(tmp_path):
     assert abs(a - b) < 0.01 * a                       # the two loads: the same radial displacement
     assert abs(a / 0.094 - 1) < 0.025 and abs(a / 0.0924 - 1) < 0.01
     assert coarse < a                                  # converging from below (0.0915, 0.0926, 0.0929 at 32)
+
+
+def test_pressure_amplitudes_scale_follower_pressures_over_time():
+    """A pressure with an amplitude follows it in dynamic runs (+1 and -1: mirror responses, 0:
+    none); a static run refuses one (it ramps its pressures with the load factor)."""
+    def run(values, kind="implicit_euler"):
+        text = squeezed_ball(False, steps=4).replace(
+            "[[fixed]]\nbox = [[-2, -2, 0.9], [2, 2, 2]]\ndisplacement = [0.0, 0.0, -0.4]\n", "")
+        text = text.replace('kind = "implicit_euler"', f'kind = "{kind}"')
+        text += f"""
+[[amplitude]]
+name = "a"
+time = [0.0, 1.0]
+value = {values}
+[[loads.pressure]]
+box = [[-2, -2, 0.0], [2, 2, 2]]
+value = 5.0
+amplitude = "a"
+[[probe]]
+name = "top"
+point = [0.0, 0.0, 1.0]
+"""
+        summary = Simulation(Scene.from_string(text), output=False).run()
+        return np.array(summary.probes["top"])
+    up, down, none = run([1.0, 1.0]), run([-1.0, -1.0]), run([0.0, 0.0])
+    assert up[2] < 0 < down[2] and np.isclose(up[2], -down[2], rtol=0.05)
+    assert np.abs(none).max() < 1e-12 * abs(up[2])          # rounding only
+    with pytest.raises(Exception, match="amplitude"):
+        run([1.0, 1.0], kind="static")
