@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from ..runtime import parallel
 from ..runtime.errors import TensormassError
 from ..runtime.output import write_json_atomic
