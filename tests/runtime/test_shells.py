@@ -55,7 +55,7 @@ point = [0.5, 0.5, 0.0]
 
 
 def centre_deflection(scene):
-    summary = Simulation(scene).run()
+    summary = Simulation(scene, output=False).run()
     assert summary.status == "ok", summary.message
     return -summary.probes["centre"][2]
 
@@ -141,7 +141,7 @@ def test_corotational_small_displacements_match_the_linear_kernel():
 def test_strip_rolled_by_an_end_moment_follows_the_elastica(tmp_path):
     """Quarter circle: M = (pi / 2) E I / L bends the strip to radius R = E I / M = 2 L / pi."""
     scene = Scene.from_toml(tm_example("strip_rollup.toml"))
-    summary = Simulation(scene).run()
+    summary = Simulation(scene, output=False).run()
     assert summary.status == "ok", summary.message
     tip = np.array(summary.probes["tip"])
     R = 2.0 / math.pi
