@@ -288,7 +288,6 @@ class CorotationalShell:
         self.n_dofs, self.dofs_per_node = NDOF, P
         self.parameters = linear.parameters
         self.n_constants = N_CONSTANTS
-        self._X = None
 
     def __repr__(self):
         return f"<CorotationalShell {self.element}/{self.law} around {self.linear!r}>"

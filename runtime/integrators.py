@@ -676,7 +676,9 @@ class GeneralizedAlpha(_Dynamic):
         c_d = gamma / (beta * h)
         scale = max(safe_norm(g0[free]), safe_norm((mass @ a)[free]))
         # loads at t_{n+1-alpha_f} (amplitudes: runtime.motion); a follower pressure at y itself
-        f_alpha = (1.0 - af) * self.external_force((t + h) / self.duration) + af * self.external_force(t / self.duration)
+        # (t first: a pressure amplitude is left at t + h, the state y's time, by the second call)
+        f_then = self.external_force(t / self.duration)
+        f_alpha = (1.0 - af) * self.external_force((t + h) / self.duration) + af * f_then
         potential = _AlphaPotential(ctx.asm, f_alpha, mass, c_m, c_d, self.alpha, K_n, u, g0, scale)
         target_u = self.prescribed((t + h) / self.duration)
         target_y = (1.0 - af) * target_u + af * u[fixed]

@@ -389,6 +389,7 @@ class _Parser:
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
         self.scene_dir = Path(base_dir) if base_dir is not None else None   # None: paths stay as written
         self.dim = None             # 2 or 3 once known
+        self.shell = False          # a shell mesh: [[fixed]] components 3..5 are its rotations
 
     # -- primitives -------------------------------------------------------------------------
     @staticmethod
@@ -729,7 +730,7 @@ class _Parser:
                 raise SceneError(f"{key}.components: expected a non-empty array of component indices")
             dim = bdim or 3
             comps = tuple(self.integer(c, f"{key}.components[{i}]", 0) for i, c in enumerate(raw))
-            if getattr(self, "shell", False) and max(comps) < 2 * dim:
+            if self.shell and max(comps) < 2 * dim:
                 pass                     # shells: 0..2 the displacement, 3..5 the rotation
             elif max(comps) >= dim:
                 raise SceneError(f"{key}.components: component {max(comps)} does not exist in {dim}D "

@@ -102,10 +102,15 @@ def _file_triangles(path):
     except Exception as exc:
         raise MeshError(f"could not read mesh {path}: {type(exc).__name__}: {exc}") from None
     blocks = [np.asarray(cb.data, dtype=np.int64) for cb in m.cells if cb.type == "triangle"]
-    other = sorted({cb.type for cb in m.cells if cb.type not in ("triangle", "line", "vertex")})
+    # curves and points (a gmsh file's boundary entities) are left out; surface cells other than
+    # 3-node triangles, and volume cells, are refused by name
+    other = sorted({cb.type for cb in m.cells if cb.type != "triangle"
+                    and _mesh._topological_dim(cb.type) not in (0, 1)})
     if other:
-        raise MeshError(f"{path}: element = \"shell\" takes triangle cells only; the file also has "
-                        f"{', '.join(other)} (remove them or mesh the surface alone)")
+        hint = " (shells are linear triangles: mesh with element order 1)" if "triangle6" in other else \
+            " (remove them or mesh the surface alone)"
+        raise MeshError(f"{path}: element = \"shell\" takes 3-node triangle cells only; the file also has "
+                        f"{', '.join(other)}{hint}")
     if not blocks:
         raise MeshError(f"{path}: element = \"shell\" needs triangle cells; the file has none")
     triangles = np.vstack(blocks)

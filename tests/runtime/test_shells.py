@@ -350,3 +350,21 @@ point = [0.0, 0.0, 1.0]
     assert np.abs(none).max() < 1e-12 * abs(up[2])          # rounding only
     with pytest.raises(Exception, match="amplitude"):
         run([1.0, 1.0], kind="static")
+
+
+def test_a_surface_file_becomes_shells_and_quadratic_surfaces_are_refused(tmp_path):
+    """file = ... with element = "shell": the file's triangles (its curves and points left out);
+    a quadratic surface is refused by name, with what to do."""
+    import meshio
+    from tensormass.runtime import surfaces
+    P, T = surfaces.icosphere(1.0, 1)
+    path = tmp_path / "ball.vtu"
+    meshio.write(path, meshio.Mesh(P, [("triangle", T), ("line", T[:3, :2]), ("vertex", T[:2, :1])]))
+    text = squeezed_ball(True, steps=2).replace(
+        'generate = "sphere"\nradius = 1.0\nsubdivisions = 2', f'file = "{path}"\nelement = "shell"')
+    summary = Simulation(Scene.from_string(text), output=False).run()
+    assert summary.status == "ok", summary.message
+    six = np.hstack([T, T])                                  # any 6-node rows: refused before any use
+    meshio.write(tmp_path / "ball6.vtu", meshio.Mesh(P, [("triangle6", six)]))
+    with pytest.raises(SceneError, match=r"triangle6 .*element order 1"):
+        Scene.from_string(text.replace("ball.vtu", "ball6.vtu"))
