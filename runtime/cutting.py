@@ -225,7 +225,7 @@ def _contributions(points, part, rows, gravity):
 
 def _masses_and_body_forces(model, new, parents, touched) -> None:
     """Lumped masses and gravity of the touched nodes, summed again over the cells around them."""
-    dpn, dim = model.dofs_per_node, model.dim
+    dpn = model.dofs_per_node
     points = new.mesh.points
     g = np.asarray(model.loads.gravity, float).reshape(-1)[:model.n_load] if np.any(model.loads.gravity) else None
     if model.mass_matrix.kind != "lumped":
