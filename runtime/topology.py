@@ -122,7 +122,10 @@ def _cell_nodes(mesh: Mesh, cell_ids: np.ndarray) -> list:
 def face_owners(mesh: Mesh, faces: np.ndarray, inc: Incidence | None = None) -> np.ndarray:
     """The cell owning each boundary face (n, kf): the cell around its first node holding all of
     its nodes (-1: none)."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(len(faces), -1)
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return np.zeros(0, dtype=np.int64)
+    faces = faces.reshape(len(faces), -1)
     inc = incidence(mesh) if inc is None else inc
     off = _offsets(mesh)
     owners = np.full(len(faces), -1, dtype=np.int64)
