@@ -367,13 +367,14 @@ class _Counter:
 
 
 def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_limit: int | None = None,
-              label: str = "task", progress=True, on_result=None) -> list:
+              label: str = "task", progress=True, on_result=None, capture: bool = True) -> list:
     """[(True, fn(*item)) or (False, 'error text')] in the order of items, whatever order they finish in.
 
     workers 1 and no scheduler: in this process, one after the other (no dask needed). Otherwise
     dask.distributed: a Client of `scheduler`, else a LocalCluster of `workers` single-threaded
     processes (THREAD_ENV, mem_limit bytes each). on_result(i, outcome) is called in item order
-    as soon as the results up to i are in (to print a task's output in order)."""
+    as soon as the results up to i are in (to print a task's output in order). capture=False: a
+    task's exception propagates (the first in item order that the engine sees), as it would in a loop."""
     items = [tuple(it) for it in items]
     counter = _Counter(len(items), label) if progress and items else None
     results: list = [None] * len(items)
@@ -391,6 +392,8 @@ def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_lim
                 try:
                     results[i] = (True, fn(*item))
                 except Exception as exc:     # noqa: BLE001 - the caller decides what a failure means
+                    if not capture:
+                        raise
                     results[i] = (False, f"{type(exc).__name__}: {exc}")
                 if counter:
                     counter(i + 1)
@@ -407,6 +410,8 @@ def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_lim
                 try:
                     results[i] = (True, future.result())
                 except Exception as exc:     # noqa: BLE001 - KilledWorker (memory), pickling, the task's own
+                    if not capture:
+                        raise
                     results[i] = (False, f"{type(exc).__name__}: {exc}")
                 done += 1
                 if counter:
