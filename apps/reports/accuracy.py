@@ -638,8 +638,10 @@ def cmd_accuracy(args) -> int:
     for key in ("elements", "laws", "quadratures", "levels"):
         if getattr(args, key, None) is not None:
             kwargs[key] = getattr(args, key)
-    run_accuracy(args.out, scene_path=args.scene, quick=args.quick, workers=_workers(args),
-                 scheduler=getattr(args, "scheduler", None), **kwargs)
+    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    if workers > 1 or scheduler is not None:      # only then: the defaults are run_accuracy's own
+        kwargs.update(workers=workers, scheduler=scheduler)
+    run_accuracy(args.out, scene_path=args.scene, quick=args.quick, **kwargs)
     return 0
 
 
