@@ -557,7 +557,9 @@ def run_stability(out_dir, quick=False, progress=print, workers: int = 1, schedu
 
 def _cmd_stability(args) -> int:
     from .accuracy import _workers
-    rows = run_stability(args.out, quick=args.quick, workers=_workers(args), scheduler=args.scheduler)
+    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    extra = {"workers": workers, "scheduler": scheduler} if workers > 1 or scheduler is not None else {}
+    rows = run_stability(args.out, quick=args.quick, **extra)
     return 0 if rows and all(r["ok"] for r in rows) else 1
 
 
