@@ -243,7 +243,9 @@ class TopologyEvent:
     """A [[cut]] or [[remove]] event (runtime.topology, runtime.cutting), at a time or after a step.
 
     cut: the faces between cells whose centroids lie on either side of the plane (point, normal),
-    in rest coordinates, inside `box` when given (an incision), are separated.
+    in rest coordinates, inside `box` when given (an incision), are separated.  Or tearing
+    (criterion = "stretch"): after every `every` steps, the interior faces (inside `box`) across
+    which the body is stretched by more than 1 + threshold open.
     remove: the cells whose rest centroid lies in `box` (and/or in the mesh group `region`).
     """
     kind: str                             # cut | remove
@@ -254,6 +256,9 @@ class TopologyEvent:
     box: tuple | None = None
     region: object = None                 # remove: a mesh group
     name: str | None = None
+    criterion: str | None = None          # cut: "stretch" tears faces whose normal stretch passes the threshold
+    threshold: float | None = None        # stretch - 1 across the face (0.5: stretched by half)
+    every: int = 1                        # tearing: checked every this many steps
 
 
 @dataclass
@@ -364,7 +369,8 @@ def _event_step(time: float, solver) -> int:
 
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
         "amplitude", "cut", "remove")
-_CUT = ("time", "step", "plane", "box", "name")
+_CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every")
+TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
@@ -557,7 +563,8 @@ class _Parser:
         topology = [self.topology_event(t, kind, f"{kind}[{i}]", solver)
                     for kind in ("cut", "remove") for i, t in enumerate(self.tables(data.get(kind, []), kind))]
         # in the order they happen (a cut and a removal at the same step: the file's order, cuts first)
-        topology.sort(key=lambda e: e.step if e.step is not None else _event_step(e.time, solver))
+        topology.sort(key=lambda e: e.step if e.step is not None else
+                      _event_step(e.time, solver) if e.time is not None else 0)
         if topology and adapt:
             raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
                              "rules yet")
@@ -915,8 +922,14 @@ class _Parser:
     def topology_event(self, t, kind, key, solver) -> TopologyEvent:
         t = self.table(t, key)
         self.keys(t, key, _CUT if kind == "cut" else _REMOVE)
+        if "criterion" in t:
+            return self.tearing(t, key)
         if ("time" in t) == ("step" in t):
-            raise SceneError(f"{key}: give time = ... (dynamic runs) or step = ..., one of them")
+            raise SceneError(f"{key}: give time = ... (dynamic runs) or step = ..., one of them "
+                             "(or criterion = \"stretch\" and a threshold: tearing)")
+        for k in ("threshold", "every"):
+            if k in t:
+                raise SceneError(f"{key}.{k}: only used with criterion = \"stretch\" (tearing)")
         event = TopologyEvent(kind=kind, name=self.string(t["name"], f"{key}.name") if "name" in t else None)
         if "time" in t:
             if solver.kind == "static":
@@ -945,6 +958,23 @@ class _Parser:
                 event.region = self.region(t["region"], f"{key}.region")
             if event.box is None and event.region is None:
                 raise SceneError(f"{key}.box: missing (the cells to remove: box = [[...], [...]] and/or region)")
+        return event
+
+    def tearing(self, t, key) -> TopologyEvent:
+        """[[cut]] criterion = "stretch": faces open where the stretch across them passes the threshold."""
+        event = TopologyEvent(kind="cut", name=self.string(t["name"], f"{key}.name") if "name" in t else None,
+                              criterion=self.string(t["criterion"], f"{key}.criterion", TEAR_CRITERIA))
+        for k in ("time", "step", "plane"):
+            if k in t:
+                raise SceneError(f"{key}.{k}: a tearing rule (criterion) acts whenever its threshold is passed; "
+                                 "it takes threshold, every and box")
+        if "threshold" not in t:
+            raise SceneError(f"{key}.threshold: missing (the stretch - 1 across a face at which it tears, e.g. 0.5)")
+        event.threshold = self.number(t["threshold"], f"{key}.threshold", positive=True)
+        if "every" in t:
+            event.every = self.integer(t["every"], f"{key}.every", 1)
+        if "box" in t:
+            event.box = self.box(t["box"], f"{key}.box")
         return event
 
     def adapt(self, t, key) -> Adapt:

@@ -393,7 +393,10 @@ class Simulation:
         """Apply the [[cut]] / [[remove]] events due after step k: a model changed only where the mesh
         did (runtime.cutting), the state carried over exactly, a new assembly pattern and solver."""
         ctx = self.ctx
-        model, u, v = self.topology.apply(self.model, k, ctx.t, ctx.u, ctx.v)
+        changed = self.topology.apply(self.model, k, ctx.t, ctx.u, ctx.v)
+        if changed is None:
+            return
+        model, u, v = changed
         start = time.perf_counter()
         self._rebuild(model, None, u=u, v=v)
         record = self.topology.records[-1]

@@ -20,10 +20,13 @@ from .errors import TensormassError
 from .regions import box_tolerance
 from .topology import TopologyError, box_cells, check_topology, incidence, plane_pairs, removal, separate
 
-__all__ = ["TopologyEvents"]
+__all__ = ["TopologyEvents", "tearing_pairs"]
 
 
-def _event_step(event, solver) -> int:
+def _event_step(event, solver) -> int | None:
+    """The step after which a timed event happens; None for a tearing rule (checked every `every` steps)."""
+    if event.criterion is not None:
+        return None
     if event.step is not None:
         return int(event.step)
     import math
@@ -73,8 +76,13 @@ class TopologyEvents:
             raise TopologyError(f"{key}: {exc}") from None
 
     def _rehearse(self, mesh) -> None:
-        """Apply every event to the rest mesh in order: refuse what would fail during the run."""
-        for i in np.argsort(self.steps, kind="stable"):
+        """Apply every timed event to the rest mesh in order: refuse what would fail during the run
+        (a tearing rule only needs its box to hold cells)."""
+        for i, e in enumerate(self.events):
+            if e.criterion is not None and e.box is not None and not box_cells(mesh, e.box, self.tol).size:
+                raise TopologyError(f"cut[{i}].box: no cell has its centroid inside it")
+        timed = [i for i, s in enumerate(self.steps) if s is not None]
+        for i in sorted(timed, key=lambda i: self.steps[i]):
             e = self.events[i]
             selection = self._select(mesh, i)
             key = f"{e.kind}[{i}]" if e.name is None else f"{e.kind} {e.name!r}"
@@ -94,29 +102,39 @@ class TopologyEvents:
     def _renumber(self, i, gone) -> None:
         """Cell pairs of later cuts follow a removal (pairs losing a cell are dropped)."""
         for j, pairs in enumerate(self.pairs):
-            if pairs is not None and self.steps[j] >= self.steps[i] and j != i and self.events[j].kind == "cut":
+            if pairs is not None and j != i and self.events[j].kind == "cut" and self.steps[j] >= self.steps[i]:
                 mapped = gone.new_ids[pairs]
                 self.pairs[j] = mapped[(mapped >= 0).all(axis=1)]
 
     def due(self, step: int) -> list:
-        return [i for i, s in enumerate(self.steps) if s == step]
+        return [i for i, (s, e) in enumerate(zip(self.steps, self.events))
+                if s == step or (s is None and step % e.every == 0)]
 
     def apply(self, model, step: int, t: float, u: np.ndarray, v: np.ndarray):
-        """Apply the events due after `step`: (model, u, v) afterwards, or None when none is due."""
+        """Apply the events due after `step`: (model, u, v) afterwards, or None when nothing changed
+        (none due, or a tearing rule that found nothing to open)."""
         due = self.due(step)
-        if not due:
-            return None
+        before = len(self.records)
         for i in due:
             model, u, v = self._apply_one(model, i, step, t, u, v)
-        return model, u, v
+        return None if len(self.records) == before else (model, u, v)
 
     def _apply_one(self, model, i, step, t, u, v):
         e = self.events[i]
         start = time.perf_counter()
         dpn = model.dofs_per_node
+        if e.criterion is not None:
+            pairs = tearing_pairs(model, u, e.threshold, e.box, self.tol)
+            try:
+                split = separate(model.mesh, pairs, incidence(model.mesh)) if len(pairs) else None
+            except TopologyError:            # faces inside the body with nothing to open yet
+                split = None
+            if split is None:
+                return model, u, v
         if e.kind == "cut":
-            pairs = _still_joined(model.mesh, self.pairs[i])
-            split = separate(model.mesh, pairs, incidence(model.mesh))
+            if e.criterion is None:
+                pairs = _still_joined(model.mesh, self.pairs[i])
+                split = separate(model.mesh, pairs, incidence(model.mesh))
             topo = time.perf_counter()
             new = separated(model, split)
             U, V = u.reshape(-1, dpn), v.reshape(-1, dpn)
@@ -133,8 +151,11 @@ class TopologyEvents:
             for x in (u, v):
                 x.reshape(-1, dpn)[gone.orphans] = 0.0
             counts = {"cells_removed": int(gone.removed.size), "nodes_orphaned": int(gone.orphans.size)}
+        if model.solver.kind == "static":
+            _refuse_floating(new, _label(e, i), step)
         done = time.perf_counter()
-        self.records.append({"step": step, "time": t, "kind": e.kind, "name": _label(e, i), **counts,
+        rule = {} if e.criterion is None else {"criterion": e.criterion, "threshold": e.threshold}
+        self.records.append({"step": step, "time": t, "kind": e.kind, "name": _label(e, i), **rule, **counts,
                              "n_points": new.n_points, "n_cells": new.mesh.n_cells,
                              "seconds": {"topology": topo - start, "model": done - topo}})
         return new, u, v
@@ -155,3 +176,107 @@ def _still_joined(mesh, pairs) -> np.ndarray:
     code = shared[:, 0] * mesh.n_cells + shared[:, 1]
     p = np.sort(pairs, axis=1)
     return pairs[np.isin(p[:, 0] * mesh.n_cells + p[:, 1], code)]
+
+
+def _mean_gradients(model, u) -> np.ndarray:
+    """(n_cells, dim, dim) volume-averaged deformation gradient of every cell (I where no material)."""
+    from .adapt import _geometry
+    dim = model.dim
+    F = np.broadcast_to(np.eye(dim), (model.mesh.n_cells, dim, dim)).copy()
+    for part in model.parts:
+        if not part.n_active:
+            continue
+        v, G = _geometry(part)
+        Gbar = np.einsum("eq,eqib->eib", v, G, optimize=True) / v.sum(axis=1)[:, None, None]
+        ue = model.element_displacements(part, u)[:, :, :dim]
+        F[part.cell_ids_active] = np.eye(dim) + np.einsum("eia,eib->eab", ue, Gbar, optimize=True)
+    return F
+
+
+def _face_normals(points, keys) -> np.ndarray:
+    """Unit normals (m, dim) of faces given by sorted corner keys (m, 4), -1 padded (3D), or edges (2D)."""
+    if points.shape[1] == 2:
+        t = points[keys[:, 1]] - points[keys[:, 0]]
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
+    else:
+        quad = keys[:, 3] >= 0
+        a, b, c = points[keys[:, 0]], points[keys[:, 1]], points[keys[:, 2]]
+        n = np.cross(b - a, c - a)
+        # a quad's corners sorted by id are not in cyclic order: its diagonals' cross product
+        if quad.any():
+            q = keys[quad]
+            p = points[q]
+            d = np.stack([np.cross(p[:, i] - p[:, j], p[:, k] - p[:, m])
+                          for i, j, k, m in ((0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2))])
+            n[quad] = d[np.argmax(np.linalg.norm(d, axis=2), axis=0), np.arange(len(q))]
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.ndarray:
+    """Cell pairs whose shared face the body stretches across by more than 1 + threshold: |F n| with n the
+    face's rest normal and F the mean of the two cells' volume-averaged deformation gradients."""
+    from .topology import _face_rows, _shared_faces
+    mesh = model.mesh
+    F = _mean_gradients(model, u)
+    stretch = np.sqrt(np.linalg.eigvalsh(np.einsum("eji,ejk->eik", F, F))[:, -1])
+    hot = np.flatnonzero(stretch >= 1.0 + threshold)
+    if box is not None and hot.size:
+        hot = np.intersect1d(hot, box_cells(mesh, box, tol))
+    if not hot.size:
+        return np.zeros((0, 2), np.int64)
+    inc = incidence(mesh)
+    from .topology import _cell_nodes
+    nodes = np.unique(np.concatenate(_cell_nodes(mesh, hot)))
+    _, around, _ = inc.of(nodes)
+    keys, owner = _face_rows(mesh, np.unique(around))
+    order = np.lexsort(keys.T[::-1])
+    k, o = keys[order], owner[order]
+    same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
+    pairs, faces = np.stack([o[same], o[same + 1]], axis=1), k[same]
+    is_hot = np.zeros(mesh.n_cells, bool)
+    is_hot[hot] = True
+    keep = is_hot[pairs].any(axis=1)
+    pairs, faces = pairs[keep], faces[keep]
+    if not len(pairs):
+        return pairs
+    n = _face_normals(mesh.points, faces)
+    Fm = (F[pairs[:, 0]] + F[pairs[:, 1]]) / 2
+    across = np.linalg.norm(np.einsum("eij,ej->ei", Fm, n), axis=1)
+    return pairs[across >= 1.0 + threshold]
+
+
+def pieces(mesh) -> tuple:
+    """(count, piece of every cell): the connected pieces of a mesh, cells joined by shared nodes."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    rows, cols, start = [], [], 0
+    for b in mesh.blocks:
+        n, k = b.cells.shape
+        rows.append(np.repeat(start + np.arange(n), k))
+        cols.append(b.cells.ravel())
+        start += n
+    A = sp.csr_matrix((np.ones(sum(r.size for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(start, mesh.n_points))
+    return connected_components(A @ A.T, directed=False)
+
+
+def _refuse_floating(model, label, step) -> None:
+    """A static run has no equilibrium for a piece that no [[fixed]] entry holds: say so."""
+    count, piece = pieces(model.mesh)
+    if count == 1:
+        return
+    held = np.zeros(model.n_points, dtype=bool)
+    held[np.unique(model.fixed_dofs // model.dofs_per_node)] = True
+    cells = np.concatenate([b.cells for b in model.mesh.blocks]) if len(model.mesh.blocks) == 1 else None
+    for p in range(count):
+        ids = np.flatnonzero(piece == p)
+        nodes = np.concatenate([c.ravel() for c in _cells_of(model.mesh, ids)]) if cells is None else cells[ids].ravel()
+        if not held[nodes].any():
+            raise TopologyError(f"{label} after step {step} leaves a piece of {ids.size} cell(s) that nothing holds: "
+                                "a static run has no equilibrium for it; use a dynamic solver.kind (the piece falls "
+                                "or floats free) or a [[fixed]] entry on it")
+
+
+def _cells_of(mesh, ids):
+    from .topology import _cell_nodes
+    return _cell_nodes(mesh, ids)

@@ -317,3 +317,47 @@ def test_frames_after_a_cut_have_the_new_points(tmp_path):
     import meshio
     counts = [meshio.read(tmp_path / "out" / f"frame_{k:06d}.vtu").points.shape[0] for k in range(4)]
     assert counts == [13 * 3 * 3] + [13 * 3 * 3 + 9] * 3
+
+
+def test_a_notched_slab_pulled_apart_tears_through():
+    """The tearing example: the notch's front opens first, the tear runs across, the halves separate."""
+    from tensormass.runtime.topology_events import pieces
+    from pathlib import Path
+    path = Path(__file__).parents[2] / "examples" / "cutting" / "slab_tearing.toml"
+    sim = tm.Simulation(tm.Scene.from_toml(path), output=False)
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    notch, *tears = summary.topology
+    assert notch["name"] == "notch" and tears and all(t["criterion"] == "stretch" for t in tears)
+    assert sum(t["faces"] for t in tears) > 3 * notch["faces"]
+    count, piece = pieces(sim.model.mesh)
+    big = np.sort(np.bincount(piece))[::-1]
+    assert count >= 2 and big[1] > 0.3 * big[0]          # two halves, not a few fragments
+    T.check_topology(sim.model.mesh)
+    # below its threshold the same pull tears nothing
+    calm = tm.Scene.from_string(path.read_text().replace("threshold = 0.35", "threshold = 5.0")
+                                .replace('dir = "out/slab_tearing"', 'dir = "out"'))
+    summary = tm.Simulation(calm, output=False).run()
+    assert [e["name"] for e in summary.topology] == ["notch"]
+
+
+def test_a_static_run_refuses_a_piece_nothing_holds():
+    text = SLAB.replace("""[[cut]]
+step = 2
+plane = [[0.5, 0, 0], [1, 0, 0]]
+box = [[0.45, 0.2, -1], [0.55, 0.6, 1]]""", """[[cut]]
+step = 2
+plane = [[0.5, 0, 0], [1, 0, 0]]
+[[cut]]
+step = 3
+plane = [[0.7, 0, 0], [1, 0, 0]]""")
+    with pytest.raises(tm.RunStopped, match=r"cut\[1\] after step 3 leaves a piece of .* nothing holds"):
+        _run(text).run()
+
+
+def test_tearing_rules_are_checked():
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].threshold: missing"):
+        tm.Scene.from_string(SLAB.replace("step = 2\nplane = [[0.5, 0, 0], [1, 0, 0]]\nbox = [[0.45, 0.2, -1], [0.55, 0.6, 1]]",
+                                          'criterion = "stretch"'))
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].step: a tearing rule"):
+        tm.Scene.from_string(SLAB.replace("step = 2\nplane", 'criterion = "stretch"\nthreshold = 0.3\nstep = 2\nplane'))
