@@ -243,7 +243,9 @@ class TopologyEvent:
     """A [[cut]] or [[remove]] event (runtime.topology, runtime.cutting), at a time or after a step.
 
     cut: the faces between cells whose centroids lie on either side of the plane (point, normal),
-    in rest coordinates, inside `box` when given (an incision), are separated.  Or tearing
+    in rest coordinates, inside `box` when given (an incision), are separated.  A blade (sweep,
+    duration): the box moves by `sweep` from `time` over `duration`, and the faces of the plane open
+    as it reaches them (their centroids).  Or tearing
     (criterion = "stretch"): after every `every` steps, the interior faces (inside `box`) across
     which the body is stretched by more than 1 + threshold open.
     remove: the cells whose rest centroid lies in `box` (and/or in the mesh group `region`).
@@ -259,6 +261,8 @@ class TopologyEvent:
     criterion: str | None = None          # cut: "stretch" tears faces whose normal stretch passes the threshold
     threshold: float | None = None        # stretch - 1 across the face (0.5: stretched by half)
     every: int = 1                        # tearing: checked every this many steps
+    sweep: tuple | None = None            # a blade: the box moves by this vector from `time` ...
+    duration: float | None = None         # ... over this long, opening the faces it reaches as it goes
 
 
 @dataclass
@@ -369,7 +373,7 @@ def _event_step(time: float, solver) -> int:
 
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
         "amplitude", "cut", "remove")
-_CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every")
+_CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every", "sweep", "duration")
 TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions")
@@ -953,6 +957,16 @@ class _Parser:
             event.normal = self.vector(plane[1], f"{key}.plane[1]", dim=len(event.point))
             if not any(event.normal):
                 raise SceneError(f"{key}.plane[1]: the normal must not be zero")
+            if ("sweep" in t) != ("duration" in t):
+                raise SceneError(f"{key}.{'duration' if 'sweep' in t else 'sweep'}: missing (a blade moves its box "
+                                 "by sweep = [dx, dy, dz] over duration seconds)")
+            if "sweep" in t:
+                if event.time is None or event.box is None:
+                    raise SceneError(f"{key}.sweep: a blade needs time = ... (dynamic runs) and the box it starts as")
+                event.sweep = self.vector(t["sweep"], f"{key}.sweep", dim=len(event.point))
+                event.duration = self.number(t["duration"], f"{key}.duration", positive=True)
+                if _event_step(event.time + event.duration, solver) > solver.steps:
+                    raise SceneError(f"{key}.duration: the blade's path ends after the run's end")
         else:
             if "region" in t:
                 event.region = self.region(t["region"], f"{key}.region")

@@ -231,7 +231,7 @@ class Split:
     cells: np.ndarray            # (m,) global ids of the cells renumbered
     local: np.ndarray            # (m,) the local node index renumbered in that cell
     node: np.ndarray             # (m,) the new node id it takes
-    faces: int                   # faces opened
+    faces: int                   # cut faces opened (a face whose nodes all stay on the front is not)
 
     @property
     def n_new(self) -> int:
@@ -339,7 +339,8 @@ def separate(mesh: Mesh, pairs, inc: Incidence | None = None) -> Split:
         raise TopologyError("cut: no face to cut (the cut surface meets no interior face of the mesh)")
     if pairs.min() < 0 or pairs.max() >= mesh.n_cells:
         raise TopologyError(f"cut: cell ids must be in 0..{mesh.n_cells - 1}")
-    cut_keys = np.unique(_pair_faces(mesh, pairs), axis=0)
+    pair_keys = _pair_faces(mesh, pairs)
+    cut_keys = np.unique(pair_keys, axis=0)
     inc = incidence(mesh) if inc is None else inc
     nodes = np.unique(cut_keys[cut_keys >= 0])
     nodes = _with_midsides(mesh, nodes, pairs)
@@ -369,7 +370,17 @@ def separate(mesh: Mesh, pairs, inc: Incidence | None = None) -> Split:
         raise TopologyError(f"cut: the {len(cut_keys)} face(s) separate nothing: every node of them lies on the "
                             "cut's front inside the body; make the cut reach the surface or cover more faces")
     parents = n_sorted[starts[new_runs]]
-    return Split(mesh.n_points, parents, cell[moved], local[moved], target[moved], len(cut_keys))
+    split = Split(mesh.n_points, parents, cell[moved], local[moved], target[moved], 0)
+    split.faces = _opened(split, pairs, pair_keys)
+    return split
+
+
+def _opened(split: Split, pairs: np.ndarray, keys: np.ndarray) -> int:
+    """How many of the cut faces the split opens (some corner differs between the two cells); the
+    others wait for more faces (an incision's front)."""
+    a = split.map_faces(np.where(keys >= 0, keys, 0), pairs[:, 0])
+    b = split.map_faces(np.where(keys >= 0, keys, 0), pairs[:, 1])
+    return int(np.count_nonzero(np.any((a != b) & (keys >= 0), axis=1)))
 
 
 def _with_midsides(mesh: Mesh, nodes: np.ndarray, pairs: np.ndarray) -> np.ndarray:

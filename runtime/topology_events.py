@@ -11,130 +11,211 @@ momentum is unchanged), nodes a removal leaves alone are set at rest and pinned.
 """
 from __future__ import annotations
 
+import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from .cutting import check_model, removed, separated
-from .errors import TensormassError
-from .regions import box_tolerance
-from .topology import TopologyError, box_cells, check_topology, incidence, plane_pairs, removal, separate
+from .regions import box_tolerance, region_cell_masks
+from .topology import (TopologyError, _cell_nodes, box_cells, check_topology, incidence, plane_pairs, removal,
+                       separate)
 
-__all__ = ["TopologyEvents", "tearing_pairs"]
+__all__ = ["TopologyEvents", "tearing_pairs", "blade_fractions", "pieces"]
 
 
-def _event_step(event, solver) -> int | None:
-    """The step after which a timed event happens; None for a tearing rule (checked every `every` steps)."""
-    if event.criterion is not None:
-        return None
-    if event.step is not None:
-        return int(event.step)
-    import math
-    return max(1, math.ceil(event.time / float(solver.dt) - 1e-9))
+def _step_at(time: float, solver) -> int:
+    """The step after which something at `time` happens: the first whose end time reaches it."""
+    return max(1, math.ceil(time / float(solver.dt) - 1e-9))
 
 
 def _label(event, index) -> str:
     return event.name or f"{event.kind}[{index}]"
 
 
-class TopologyEvents:
-    """The events of a scene, their cell selections, and the record of what each changed."""
+def _key(event, index) -> str:
+    return f"{event.kind}[{index}]" if event.name is None else f"{event.kind} {event.name!r}"
 
-    def __init__(self, model, events, check: bool = True):
+
+@dataclass
+class _Action:
+    """One thing to do after a step: event `event`'s cut of `pairs` (cell pairs, current ids) or its
+    removal (cells selected when applied); step None: a tearing rule, checked every `every` steps."""
+    step: int | None
+    event: int
+    pairs: np.ndarray | None = None
+    partial: bool = False         # a blade's step: its faces may open nothing yet (they wait)
+
+
+def blade_fractions(centres: np.ndarray, box, sweep) -> np.ndarray:
+    """For each point, the smallest fraction s in [0, 1] of the sweep at which the box moved by s x sweep
+    has covered it at some moment (inf: never): per axis, lo <= c - sigma d <= hi bounds sigma."""
+    lo, hi = (np.asarray(c, float) for c in box)
+    d = np.asarray(sweep, float)
+    start = np.zeros(len(centres))
+    stop = np.ones(len(centres))
+    for i in range(centres.shape[1]):
+        c = centres[:, i]
+        if d[i] == 0.0:
+            out = (c < lo[i]) | (c > hi[i])
+            stop[out] = -np.inf
+            continue
+        a, b = (c - hi[i]) / d[i], (c - lo[i]) / d[i]
+        start = np.maximum(start, np.minimum(a, b))
+        stop = np.minimum(stop, np.maximum(a, b))
+    return np.where(start <= stop, start, np.inf)
+
+
+class TopologyEvents:
+    """The events of a scene, as actions after given steps, and the record of what each changed."""
+
+    def __init__(self, model, events):
         self.events = list(events)
-        self.steps = [_event_step(e, model.solver) for e in self.events]
         self.tol = box_tolerance(model.mesh.points)
         self.records: list = []
+        self.actions: list = []
         if not self.events:
             return
         try:
             check_model(model)
         except TopologyError as exc:
             raise TopologyError(f"{self.events[0].kind}: {exc}") from None
-        self.pairs = [None] * len(self.events)
+        self._plan(model)
         self._rehearse(model.mesh)
 
-    def _select(self, mesh, i):
-        """Cut: the cell pairs on the rest mesh (ids of the mesh at that point); remove: cell ids."""
+    # -- setup ----------------------------------------------------------------------------------
+    def _plan(self, model) -> None:
+        mesh, solver = model.mesh, model.solver
+        for i, e in enumerate(self.events):
+            if e.criterion is not None:
+                if e.box is not None and not box_cells(mesh, e.box, self.tol).size:
+                    raise TopologyError(f"{_key(e, i)}.box: no cell has its centroid inside it")
+                self.actions.append(_Action(None, i))
+            elif e.kind == "remove":
+                self.actions.append(_Action(_step(e, solver), i))
+            elif e.sweep is None:
+                self.actions.append(_Action(_step(e, solver), i, self._plane_pairs(mesh, i, e.box)))
+            else:
+                self.actions.extend(self._blade(mesh, solver, i))
+        # in time order; at one step, the file's order (cuts before removals, as the scene lists them)
+        self.actions.sort(key=lambda a: (-1 if a.step is None else a.step))
+
+    def _plane_pairs(self, mesh, i, box):
         e = self.events[i]
-        key = f"{e.kind}[{i}]" if e.name is None else f"{e.kind} {e.name!r}"
-        try:
-            if e.kind == "cut":
-                pairs = plane_pairs(mesh, e.point, e.normal, e.box, tol=self.tol)
-                if not len(pairs):
-                    raise TopologyError("the plane meets no interior face" + (" inside the box" if e.box else ""))
-                return pairs
-            cells = box_cells(mesh, e.box, self.tol) if e.box is not None else np.arange(mesh.n_cells)
-            if e.region is not None:
-                from .regions import region_cells
-                cells = np.intersect1d(cells, region_cells(mesh, e.region, f"{key}.region"))
-            if not cells.size:
-                raise TopologyError("no cell has its centroid inside the box" if e.region is None
-                                    else "no cell of the region inside the box")
-            return cells
-        except TensormassError as exc:
-            raise TopologyError(f"{key}: {exc}") from None
+        pairs = plane_pairs(mesh, e.point, e.normal, box, tol=self.tol)
+        if not len(pairs):
+            raise TopologyError(f"{_key(e, i)}: the plane meets no interior face" + (" inside the box" if box else ""))
+        return pairs
+
+    def _blade(self, mesh, solver, i) -> list:
+        """A blade path: the box moves by `sweep` from `time` over `duration`; after every step of that
+        span, the faces it has reached so far (their centroids) open."""
+        e = self.events[i]
+        lo, hi = (np.asarray(c, float) for c in e.box)
+        moved = lo + np.asarray(e.sweep), hi + np.asarray(e.sweep)
+        hull = (np.minimum(lo, moved[0]), np.maximum(hi, moved[1]))
+        pairs = self._plane_pairs(mesh, i, hull)
+        centres = np.array([mesh.points[np.intersect1d(a, b)].mean(axis=0) for a, b in
+                            zip(_cell_nodes(mesh, pairs[:, 0]), _cell_nodes(mesh, pairs[:, 1]))])
+        s = blade_fractions(centres, e.box, e.sweep)
+        pairs, s = pairs[np.isfinite(s)], s[np.isfinite(s)]
+        first, last = _step_at(e.time, solver), _step_at(e.time + e.duration, solver)
+        actions = []
+        for k in range(first, last + 1):
+            # the blade's position after step k, as a fraction of its path
+            reach = min(1.0, max(0.0, (k * float(solver.dt) - e.time) / e.duration)) if k < last else 1.0
+            now = pairs[s <= reach + 1e-12]
+            if len(now) and (not actions or len(now) > len(actions[-1].pairs)):
+                actions.append(_Action(k, i, now, partial=True))
+        if not actions:
+            raise TopologyError(f"{_key(e, i)}: the blade's path meets no interior face of the plane")
+        return actions
+
+    def _select_cells(self, mesh, i) -> np.ndarray:
+        """The cells a removal takes out (rest centroids in its box, in its region)."""
+        e = self.events[i]
+        cells = box_cells(mesh, e.box, self.tol) if e.box is not None else np.arange(mesh.n_cells)
+        if e.region is not None:
+            masks = region_cell_masks(mesh, e.region, f"{_key(e, i)}.region")
+            cells = np.intersect1d(cells, np.flatnonzero(np.concatenate(masks)))
+        if not cells.size:
+            raise TopologyError(f"{_key(e, i)}: " + ("no cell has its centroid inside the box" if e.region is None
+                                                     else "no cell of the region inside the box"))
+        return cells
 
     def _rehearse(self, mesh) -> None:
-        """Apply every timed event to the rest mesh in order: refuse what would fail during the run
-        (a tearing rule only needs its box to hold cells)."""
-        for i, e in enumerate(self.events):
-            if e.criterion is not None and e.box is not None and not box_cells(mesh, e.box, self.tol).size:
-                raise TopologyError(f"cut[{i}].box: no cell has its centroid inside it")
-        timed = [i for i, s in enumerate(self.steps) if s is not None]
-        for i in sorted(timed, key=lambda i: self.steps[i]):
-            e = self.events[i]
-            selection = self._select(mesh, i)
-            key = f"{e.kind}[{i}]" if e.name is None else f"{e.kind} {e.name!r}"
+        """Apply the timed actions to the rest mesh in order: refuse what would fail during the run."""
+        opened = set()
+        for n, action in enumerate(self.actions):
+            if action.step is None:
+                continue
+            e = self.events[action.event]
             try:
                 if e.kind == "cut":
-                    self.pairs[i] = selection
-                    mesh = separate(mesh, _still_joined(mesh, selection)).apply(mesh)
+                    split = self._split(mesh, action)
+                    if split is not None:
+                        opened.add(action.event)
+                        mesh = split.apply(mesh)
                 else:
-                    gone = removal(mesh, selection)
-                    self._renumber(i, gone)
+                    gone = removal(mesh, self._select_cells(mesh, action.event))
+                    self._renumber(n, gone)
                     mesh = gone.apply(mesh)
             except TopologyError as exc:
                 message = str(exc).split(": ", 1)[-1] if str(exc).startswith(("cut:", "remove:")) else str(exc)
-                raise TopologyError(f"{key}: {message}") from None
+                raise TopologyError(f"{_key(e, action.event)}: {message}") from None
+        for i, e in enumerate(self.events):
+            if e.kind == "cut" and e.sweep is not None and i not in opened:
+                raise TopologyError(f"{_key(e, i)}: the faces the blade reaches separate nothing (every node of "
+                                    "them stays on the cut's front); make the path reach the surface")
         check_topology(mesh)
 
-    def _renumber(self, i, gone) -> None:
-        """Cell pairs of later cuts follow a removal (pairs losing a cell are dropped)."""
-        for j, pairs in enumerate(self.pairs):
-            if pairs is not None and j != i and self.events[j].kind == "cut" and self.steps[j] >= self.steps[i]:
-                mapped = gone.new_ids[pairs]
-                self.pairs[j] = mapped[(mapped >= 0).all(axis=1)]
+    def _split(self, mesh, action, inc=None):
+        """The Split of a cut action (None: a blade step whose faces open nothing yet)."""
+        pairs = _still_joined(mesh, action.pairs)
+        if action.partial and not len(pairs):
+            return None
+        try:
+            return separate(mesh, pairs, inc)
+        except TopologyError:
+            if action.partial:
+                return None
+            raise
 
+    def _renumber(self, n, gone) -> None:
+        """Cell pairs of the later cut actions follow a removal (pairs losing a cell are dropped)."""
+        for action in self.actions[n + 1:]:
+            if action.pairs is not None:
+                mapped = gone.new_ids[action.pairs]
+                action.pairs = mapped[(mapped >= 0).all(axis=1)]
+
+    # -- during the run ---------------------------------------------------------------------------
     def due(self, step: int) -> list:
-        return [i for i, (s, e) in enumerate(zip(self.steps, self.events))
-                if s == step or (s is None and step % e.every == 0)]
+        return [n for n, a in enumerate(self.actions)
+                if a.step == step or (a.step is None and step % self.events[a.event].every == 0)]
 
     def apply(self, model, step: int, t: float, u: np.ndarray, v: np.ndarray):
-        """Apply the events due after `step`: (model, u, v) afterwards, or None when nothing changed
-        (none due, or a tearing rule that found nothing to open)."""
-        due = self.due(step)
+        """Apply the actions due after `step`: (model, u, v) afterwards, or None when nothing changed
+        (none due, a tearing rule that found nothing to open, a blade whose faces wait)."""
         before = len(self.records)
-        for i in due:
-            model, u, v = self._apply_one(model, i, step, t, u, v)
+        for n in self.due(step):
+            model, u, v = self._apply_one(model, n, step, t, u, v)
         return None if len(self.records) == before else (model, u, v)
 
-    def _apply_one(self, model, i, step, t, u, v):
-        e = self.events[i]
+    def _apply_one(self, model, n, step, t, u, v):
+        action = self.actions[n]
+        i, e = action.event, self.events[action.event]
         start = time.perf_counter()
         dpn = model.dofs_per_node
-        if e.criterion is not None:
-            pairs = tearing_pairs(model, u, e.threshold, e.box, self.tol)
-            try:
-                split = separate(model.mesh, pairs, incidence(model.mesh)) if len(pairs) else None
-            except TopologyError:            # faces inside the body with nothing to open yet
-                split = None
+        if e.kind == "cut":
+            inc = incidence(model.mesh)
+            if e.criterion is not None:
+                pairs = tearing_pairs(model, u, e.threshold, e.box, self.tol)
+                split = self._split(model.mesh, _Action(step, i, pairs, partial=True), inc) if len(pairs) else None
+            else:
+                split = self._split(model.mesh, action, inc)
             if split is None:
                 return model, u, v
-        if e.kind == "cut":
-            if e.criterion is None:
-                pairs = _still_joined(model.mesh, self.pairs[i])
-                split = separate(model.mesh, pairs, incidence(model.mesh))
             topo = time.perf_counter()
             new = separated(model, split)
             U, V = u.reshape(-1, dpn), v.reshape(-1, dpn)
@@ -142,9 +223,8 @@ class TopologyEvents:
             v = np.vstack([V, V[split.parents]]).ravel()
             counts = {"faces": split.faces, "nodes_added": split.n_new, "cells_changed": int(split.changed_cells.size)}
         else:
-            cells = self._select(model.mesh, i)
-            gone = removal(model.mesh, cells, incidence(model.mesh))
-            self._renumber(i, gone)
+            gone = removal(model.mesh, self._select_cells(model.mesh, i), incidence(model.mesh))
+            self._renumber(n, gone)
             topo = time.perf_counter()
             new = removed(model, gone)
             u, v = u.copy(), v.copy()
@@ -162,6 +242,10 @@ class TopologyEvents:
 
     def summary(self) -> list:
         return list(self.records)
+
+
+def _step(event, solver) -> int:
+    return int(event.step) if event.step is not None else _step_at(event.time, solver)
 
 
 def _still_joined(mesh, pairs) -> np.ndarray:
@@ -215,7 +299,7 @@ def _face_normals(points, keys) -> np.ndarray:
 def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.ndarray:
     """Cell pairs whose shared face the body stretches across by more than 1 + threshold: |F n| with n the
     face's rest normal and F the mean of the two cells' volume-averaged deformation gradients."""
-    from .topology import _face_rows, _shared_faces
+    from .topology import _face_rows
     mesh = model.mesh
     F = _mean_gradients(model, u)
     stretch = np.sqrt(np.linalg.eigvalsh(np.einsum("eji,ejk->eik", F, F))[:, -1])
@@ -225,7 +309,6 @@ def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.
     if not hot.size:
         return np.zeros((0, 2), np.int64)
     inc = incidence(mesh)
-    from .topology import _cell_nodes
     nodes = np.unique(np.concatenate(_cell_nodes(mesh, hot)))
     _, around, _ = inc.of(nodes)
     keys, owner = _face_rows(mesh, np.unique(around))
@@ -278,5 +361,4 @@ def _refuse_floating(model, label, step) -> None:
 
 
 def _cells_of(mesh, ids):
-    from .topology import _cell_nodes
     return _cell_nodes(mesh, ids)
