@@ -25,7 +25,7 @@ symmetric).
 
 Why this rather than a Delaunay of scattered points: Delaunay tetrahedralisations make slivers
 (flat tetrahedra with dihedral angles near 0 and 180 deg) that spoil the stiffness matrix.  Here
-the minimum dihedral angle is 17-19 deg at every size (the cube-corner directions, where three
+the minimum dihedral angle is 17-19 deg at every size from n = 2 (13.8 deg at n = 1) (the cube-corner directions, where three
 blocks meet at 120 deg on the sphere, are the worst; CORE_SIZE and LAYERS were tuned on it), the
 maximum 135 deg.
 
