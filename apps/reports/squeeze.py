@@ -12,6 +12,8 @@ no contact: the plates are glued to the caps, as in examples/shells/ball_squeeze
 
     shell + constraint   CST-DKT shells (co-rotational) on an icosphere of 1 280 triangles (the
                          thesis' count), h = 10 cm, solver.preserve_volume = true
+    shell + constraint   the same, plus project_velocities after every step (see there)
+      + velocities
     shell                the same without the constraint
     FEM hooke            tetrahedra, linear elasticity (small strain: the thesis' "linear FEM")
     FEM neohookean       tetrahedra, compressible neo-Hookean (finite strain), the same E and nu
@@ -22,10 +24,11 @@ The tetrahedra are runtime.solids.ball_tetrahedra (a cubed ball, no gmsh): 6 480
 (gauss1) tetrahedra, exact for linear ones.
 
 **Loading: implicit Euler, ramp then hold.**  The top cap follows an amplitude table: down 0.6 m
-linearly over RAMP seconds, then held for HOLD seconds so that the motion settles (dt = 0.02 s).
-Static load steps were not used: the squeezed ball is a buckling-prone structure (the shell
-without the constraint, and MSS, which has no resistance to volume change beyond its edges).
-The report gives the final kinetic energy, to show how close to rest each run ended.
+linearly over RAMP seconds, then held for HOLD seconds so that the motion settles (dt = 0.02 s,
+150 steps).  Implicit Euler is the thesis' scheme (Table 6.1) and that of
+examples/shells/ball_squeezed.toml; the runtime's implicit Euler is linearised (one linear solve
+per step), which every model here runs through.  The final kinetic energy says how close to rest
+each run ended.
 
 **Measurements** at the end of the run:
 
@@ -40,10 +43,19 @@ The report gives the final kinetic energy, to show how close to rest each run en
     linear dV       tetrahedra only: the volume change the linear strain sees, sum V0 tr(grad u),
                     over V0; next to the true one it shows what small-strain elasticity is blind to
 
+**What was measured** (full run; the README's thin-shell section has the table): the shell
+keeps its volume with the constraint (2e-16) and loses 11.8 % without; MSS loses 12.5 % (the
+thesis' figure) and ends with 326 inverted tetrahedra (status "invalid": edge springs do not resist
+inversion); linear FEM loses 2.96 % (thesis 1.9 %) while its own measure tr(grad u) sees -0.36 %:
+small strain misses the quadratic terms of det(I + grad u), so its bulk stiffness does not hold
+the volume at 30 %; neo-Hookean with the same E and nu loses 0.40 %.  The runtime's constraint
+moves positions only, and the kinetic energy grows through the run (220 J at the end, 2.5 J
+without the constraint); the row "shell_constraint_v" adds project_velocities and stays at 0.8 J.
+
 **What differs from the thesis** (whose figures are printed next to ours: FEM 1.9 %, MSS
-12.5 %, CST-DKT 0 %): the radius, the step count, the time scheme and the meshes are not given
-there; our tetrahedral mesh is a cubed ball, not the thesis' mesh, so the numbers are this
-report's, measured on this setup.  The README's thin-shell section has the table of a full run.
+12.5 %, CST-DKT 0 %): the radius, the step count, the time scheme's details and the meshes are not
+given there; our tetrahedral mesh is a cubed ball, not the thesis' mesh (our MSS has 7 910 springs,
+the thesis' 5 000), so the numbers are this report's, measured on this setup.
 """
 from __future__ import annotations
 
@@ -269,8 +281,12 @@ def run_squeeze(out, quick: bool = False, progress=print) -> list:
 
 
 def _cmd_squeeze(args) -> int:
+    """Exit 1 if a run failed or diverged, or the constraint let the volume drift; MSS ending with
+    inverted tetrahedra ("invalid", the health monitor's verdict) is a measured result, not a failure."""
     rows = run_squeeze(args.out, quick=args.quick)
-    return 0 if all(r["status"] in ("ok", "warnings") for r in rows) else 1
+    ran = all(r["status"] in ("ok", "warnings", "invalid") for r in rows)
+    kept = all(abs(r["volume_loss_percent"]) < 1e-6 for r in rows if r["model"].startswith("shell_constraint"))
+    return 0 if ran and kept else 1
 
 
 def add_squeeze_command(subparsers) -> None:
