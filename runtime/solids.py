@@ -25,9 +25,10 @@ symmetric).
 
 Why this rather than a Delaunay of scattered points: Delaunay tetrahedralisations make slivers
 (flat tetrahedra with dihedral angles near 0 and 180 deg) that spoil the stiffness matrix.  Here
-the minimum dihedral angle is 17-19 deg at every size from n = 2 (13.8 deg at n = 1) (the cube-corner directions, where three
-blocks meet at 120 deg on the sphere, are the worst; CORE_SIZE and LAYERS were tuned on it), the
-maximum 135 deg.
+the minimum dihedral angle is 17-19 deg at every size from n = 2 (13.8 deg at n = 1), the maximum
+135 deg.  The worst tetrahedra sit at the central cube's corners, where three blocks meet (at
+n = 6: 18.1 deg, centroids at 0.58 R along the diagonals); CORE_SIZE and LAYERS were tuned on
+the minimum angle.
 
 Sizes: 6 (n^3 + 6 n^2 layers) tetrahedra, layers = round(LAYERS n) by default; the default n = 6
 (4 layers) has 6 480 tetrahedra and 1 215 nodes, next to the thesis' 6 665 (section 4.7).  The

@@ -222,7 +222,8 @@ def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
         linear = _tetra_measures(mesh.points, mesh.blocks[0].cells, u)[1] / volume.rest
         inverted = int((tetra_volumes(mesh.points + u, mesh.blocks[0].cells) <= 0.0).sum())
     row.update({"cells": int(len(mesh.blocks[0].cells)), "nodes": int(model.n_points),
-                "steps": int(sim.step), "status": status, "inverted": inverted, "volume_rest": volume.rest, "volume_end": end,
+                "steps": int(sim.step), "status": status, "inverted": inverted,
+                "volume_rest": volume.rest, "volume_end": end,
                 "volume_loss_percent": 100.0 * (1.0 - end / volume.rest),
                 "max_volume_loss_percent": 100.0 * max(losses) if losses else float("nan"),
                 "linear_dv_percent": 100.0 * linear, "equator_bulge": float((rho1 - rho0).mean()),
