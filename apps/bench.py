@@ -43,6 +43,7 @@ from .bench_integrators import add_integrators_command
 from .bench_organ import add_organ_command
 from .bench_springs import add_springs_command
 from .bench_shells import add_shells_command
+from .bench_cutting import add_cutting_command
 from .bench_steps import add_steps_command
 from .classic import LAWS, load_classic
 from .machine import format_machine, machine_info
@@ -529,6 +530,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_formulations_command(sub)
     add_springs_command(sub)
     add_shells_command(sub)
+    add_cutting_command(sub)
     return bench
 
 

@@ -9,6 +9,7 @@
     tensormass bench organ|history|formulations   gmsh organs and solvers; history cost; formulations' cost
     tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
     tensormass plot SUMMARY.json [-o PNG]         history curves of a run (probes, energies, reactions, solver)
+    tensormass batch SCENES... [--vary K=V,..]    scenes x variations as tasks on dask.distributed, one table
 
 Every ending is an exit code and at most one line on stderr (README, "Exit codes"):
 0 done; 1 internal error (a bug: `tensormass: internal error: ...`, the traceback
@@ -41,6 +42,7 @@ from ..generator import shape_tables, volumetric
 from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
                               TensormassError)
 from ..runtime.output import check_writable
+from .batch import add_batch_command
 from .bench import add_bench_command
 from .commands import add_commands
 from .plot import add_plot_command
@@ -182,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_generate)
 
     add_commands(sub)                      # run, demo
+    add_batch_command(sub)                 # batch: scenes x variations on dask.distributed
     add_bench_command(sub)                 # bench kernels, bench compile, bench steps
     add_report_command(sub)                # report accuracy, report stability
     add_plot_command(sub)                  # plot SUMMARY.json: history curves

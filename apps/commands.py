@@ -190,6 +190,21 @@ def _fmt_kernels(kernels) -> str:
     return str(kernels)
 
 
+def _topology_rows(events) -> list:
+    """What the [[cut]] / [[remove]] events changed, when, and how long each took to apply."""
+    rows = []
+    for e in events or []:
+        if e.get("kind") == "cut":
+            what = (f"{e.get('faces')} face(s) opened, +{e.get('nodes_added')} node(s), "
+                    f"{e.get('cells_changed')} cell(s) renumbered")
+        else:
+            what = f"{e.get('cells_removed')} cell(s) removed, {e.get('nodes_orphaned')} node(s) left without a cell"
+        seconds = (e.get("seconds") or {}).get("total")
+        rows.append((e.get("kind"), f"{e.get('name')} after step {e.get('step')} (t = {e.get('time', 0):.4g}): "
+                                    f"{what}; applied in {_fmt_seconds(seconds)}"))
+    return rows
+
+
 def _adapt_rows(adapt) -> list:
     """What the [[adapt]] rules did: counts, the laws at the end, and when things changed."""
     if not adapt:
@@ -302,6 +317,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     rows += _health_rows(data.get("health"))
     rows += _warning_rows(data.get("warnings"), json_path)
     rows += _adapt_rows(data.get("adapt"))
+    rows += _topology_rows(data.get("topology"))
     o = data.get("output")
     if o:
         where = o.get("pvd") or f"{o['dir']} (no frame written)"

@@ -87,6 +87,9 @@ class MassMatrix:
                 Me = share[:, None, None] * np.eye(cells.shape[1])
             lumped = lump(Me, part.element)
             np.add.at(node_mass, cells, lumped)
+            if hasattr(part, "cell_masses"):          # kept for local updates (runtime.cutting)
+                part.cell_masses = np.zeros(part.cells.shape)
+                part.cell_masses[rows] = lumped
             if getattr(part, "rotary", None) is not None:
                 np.add.at(node_rotary, cells, lumped * np.asarray(part.rotary, float)[rows, None])
             blocks.append((i, rows, cells, Me))

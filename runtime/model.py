@@ -60,6 +60,10 @@ class Part:
     density: np.ndarray          # (n,) mass density of each cell
     active: np.ndarray | None = None   # (n,) bool: cells this law currently models (None: all)
     rotary: np.ndarray | None = None   # (n,) rotary inertia per unit mass (m^2) of nodes with rotations (shells)
+    # per cell and node: its lumped mass and its share of the body force integral int N_a rho dV
+    # (zero rows for inactive cells), kept so a topology change re-sums nodes locally (runtime.cutting)
+    cell_masses: np.ndarray | None = None
+    cell_shares: np.ndarray | None = None
 
     def __post_init__(self):
         if self.active is None:
@@ -405,12 +409,18 @@ class Model:
         """Consistent loads (runtime.loads): gravity f_a = int N_a rho g dV, tractions int N_a t dA."""
         g = self._vector(self.loads.gravity, "loads.gravity")
         f = np.zeros(self.n_dofs)
+        # gravity's share and the loaded faces, kept for local updates after a topology change (runtime.cutting)
+        self._body = np.zeros((self.n_points, self.n_load))
+        self._tractions = []
         if np.any(g):
             for part in self.parts:          # every cell once: in the part whose law models it
                 rows = np.flatnonzero(part.active)
                 shares = _loads.volume_shares(self.mesh.points, part.element, part.cells[rows], part.density[rows],
                                               measure=part.volume[rows])
-                np.add.at(self._loaded(f), part.cells[rows], shares[:, :, None] * g)
+                np.add.at(self._body, part.cells[rows], shares[:, :, None] * g)
+                part.cell_shares = np.zeros(part.cells.shape)
+                part.cell_shares[rows] = shares
+            self._loaded(f)[:] += self._body
         for i, load in enumerate(self.loads.nodal):
             force = self._vector(load.force, f"loads.nodal[{i}].force")
             if load.kind == "moment":
@@ -443,6 +453,7 @@ class Model:
         if not faces:
             raise TensormassError(f"loads.nodal[{i}] (traction): no boundary face inside box {box!r}")
         f += _loads.traction(self.mesh.points, faces, traction)
+        self._tractions.append((faces, traction))
 
     def _faces_in(self, box) -> dict:
         """{face type: (n, k)} boundary faces whose nodes all lie inside the box (runtime.loads)."""
@@ -524,6 +535,7 @@ class Model:
         if not faces:
             raise TensormassError(f"{key} (traction): region {load.region!r} has no boundary face")
         f += _loads.traction(self.mesh.points, faces, value)
+        self._tractions.append((faces, value))
 
     def _probe(self, probe, i: int) -> PointProbe:
         """A point probe: the cell holding the point and its shape functions there; a region/box

@@ -98,7 +98,7 @@ from .scene_mesh import load_mesh as _load_mesh
 from . import scene_formulation as _formulation
 
 # Names that lived here before runtime.regions and runtime.scene_mesh (kept for importers).
-__all__ = ["Scene", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "PressureLoad", "Loads", "Solver", "Probe",
+__all__ = ["Scene", "TopologyEvent", "SceneError", "MeshSpec", "Material", "Fixed", "NodalLoad", "PressureLoad", "Loads", "Solver", "Probe",
            "Output", "Adapt", "box_contains", "box_tolerance", "prescribed_values", "reachable_laws",
            "switch_applies", "switch_parameters", "PROBE_TOLERANCE", "MAX_STEPS"]
 
@@ -240,6 +240,29 @@ class Adapt:
 
 
 @dataclass
+class TopologyEvent:
+    """A [[cut]] or [[remove]] event (runtime.topology, runtime.cutting), at a time or after a step.
+
+    cut: the faces between cells whose centroids lie on either side of the plane (point, normal),
+    in rest coordinates, inside `box` when given (an incision), are separated.  Or tearing
+    (criterion = "stretch"): after every `every` steps, the interior faces (inside `box`) across
+    which the body is stretched by more than 1 + threshold open.
+    remove: the cells whose rest centroid lies in `box` (and/or in the mesh group `region`).
+    """
+    kind: str                             # cut | remove
+    time: float | None = None             # dynamic runs: after the first step ending at or past it
+    step: int | None = None               # or after this step (any solver)
+    point: tuple | None = None            # cut: a point of the plane
+    normal: tuple | None = None           # cut: its normal
+    box: tuple | None = None
+    region: object = None                 # remove: a mesh group
+    name: str | None = None
+    criterion: str | None = None          # cut: "stretch" tears faces whose normal stretch passes the threshold
+    threshold: float | None = None        # stretch - 1 across the face (0.5: stretched by half)
+    every: int = 1                        # tearing: checked every this many steps
+
+
+@dataclass
 class Scene:
     mesh: MeshSpec
     materials: list                       # [Material]
@@ -254,6 +277,7 @@ class Scene:
     source: str | None = None             # the scene file, when read from one
     max_memory: int | str | None = None   # memory limit (bytes or "8G"); None: see runtime.resources
     amplitudes: list = field(default_factory=list)  # [Amplitude] (runtime.motion)
+    topology: list = field(default_factory=list)    # [TopologyEvent]: [[cut]] and [[remove]] in time order
 
     # -- reading ------------------------------------------------------------------------------
     @classmethod
@@ -339,8 +363,16 @@ class Scene:
 
 # ============================================================================== parsing
 
+
+def _event_step(time: float, solver) -> int:
+    """The step after which an event at `time` happens: the first whose end time reaches it."""
+    return max(1, math.ceil(time / float(solver.dt) - 1e-9))
+
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
-        "amplitude")
+        "amplitude", "cut", "remove")
+_CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every")
+TEAR_CRITERIA = ("stretch",)
+_REMOVE = ("time", "step", "box", "region", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
@@ -530,9 +562,17 @@ class _Parser:
         if solver.kind == "static" and not fixed:
             raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
                              "(without constraints the stiffness matrix is singular)")
+        topology = [self.topology_event(t, kind, f"{kind}[{i}]", solver)
+                    for kind in ("cut", "remove") for i, t in enumerate(self.tables(data.get(kind, []), kind))]
+        # in the order they happen (a cut and a removal at the same step: the file's order, cuts first)
+        topology.sort(key=lambda e: e.step if e.step is not None else
+                      _event_step(e.time, solver) if e.time is not None else 0)
+        if topology and adapt:
+            raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
+                             "rules yet")
         scene = Scene(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver,
                       probes=probes, output=output, adapt=adapt, name=name, description=description,
-                      max_memory=max_memory, amplitudes=amplitudes)
+                      max_memory=max_memory, amplitudes=amplitudes, topology=topology)
         if load_mesh:
             scene.validate(scene.load_mesh())
         return scene
@@ -900,6 +940,64 @@ class _Parser:
                          region=self.region(t["region"], f"{key}.region") if "region" in t else None,
                          box=self.box(t["box"], f"{key}.box") if "box" in t else None)
         return Probe(name=name, point=self.vector(t["point"], f"{key}.point"))
+
+    def topology_event(self, t, kind, key, solver) -> TopologyEvent:
+        t = self.table(t, key)
+        self.keys(t, key, _CUT if kind == "cut" else _REMOVE)
+        if "criterion" in t:
+            return self.tearing(t, key)
+        if ("time" in t) == ("step" in t):
+            raise SceneError(f"{key}: give time = ... (dynamic runs) or step = ..., one of them "
+                             "(or criterion = \"stretch\" and a threshold: tearing)")
+        for k in ("threshold", "every"):
+            if k in t:
+                raise SceneError(f"{key}.{k}: only used with criterion = \"stretch\" (tearing)")
+        event = TopologyEvent(kind=kind, name=self.string(t["name"], f"{key}.name") if "name" in t else None)
+        if "time" in t:
+            if solver.kind == "static":
+                raise SceneError(f"{key}.time: a static run has load steps, not time; give step = ...")
+            event.time = self.number(t["time"], f"{key}.time", min_value=0.0)
+            if _event_step(event.time, solver) > solver.steps:
+                raise SceneError(f"{key}.time: {_fmt(event.time)} is after the run's end "
+                                 f"({solver.steps} steps of {_fmt(solver.dt)})")
+        else:
+            event.step = self.integer(t["step"], f"{key}.step", 1, solver.steps,
+                                      why=f"the run has {solver.steps} steps")
+        if "box" in t:
+            event.box = self.box(t["box"], f"{key}.box")
+        if kind == "cut":
+            if "plane" not in t:
+                raise SceneError(f"{key}.plane: missing (plane = [[x, y, z], [nx, ny, nz]]: a point and the normal)")
+            plane = t["plane"]
+            if not isinstance(plane, list) or len(plane) != 2:
+                raise SceneError(f"{key}.plane: expected [[point...], [normal...]], got {_fmt(plane)}")
+            event.point = self.vector(plane[0], f"{key}.plane[0]")
+            event.normal = self.vector(plane[1], f"{key}.plane[1]", dim=len(event.point))
+            if not any(event.normal):
+                raise SceneError(f"{key}.plane[1]: the normal must not be zero")
+        else:
+            if "region" in t:
+                event.region = self.region(t["region"], f"{key}.region")
+            if event.box is None and event.region is None:
+                raise SceneError(f"{key}.box: missing (the cells to remove: box = [[...], [...]] and/or region)")
+        return event
+
+    def tearing(self, t, key) -> TopologyEvent:
+        """[[cut]] criterion = "stretch": faces open where the stretch across them passes the threshold."""
+        event = TopologyEvent(kind="cut", name=self.string(t["name"], f"{key}.name") if "name" in t else None,
+                              criterion=self.string(t["criterion"], f"{key}.criterion", TEAR_CRITERIA))
+        for k in ("time", "step", "plane"):
+            if k in t:
+                raise SceneError(f"{key}.{k}: a tearing rule (criterion) acts whenever its threshold is passed; "
+                                 "it takes threshold, every and box")
+        if "threshold" not in t:
+            raise SceneError(f"{key}.threshold: missing (the stretch - 1 across a face at which it tears, e.g. 0.5)")
+        event.threshold = self.number(t["threshold"], f"{key}.threshold", positive=True)
+        if "every" in t:
+            event.every = self.integer(t["every"], f"{key}.every", 1)
+        if "box" in t:
+            event.box = self.box(t["box"], f"{key}.box")
+        return event
 
     def adapt(self, t, key) -> Adapt:
         t = self.table(t, key)

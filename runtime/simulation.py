@@ -29,6 +29,7 @@ from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
 from . import reactions as _reactions
 from .refine import interpolate_nodal
+from .topology_events import TopologyEvents
 
 __all__ = ["Simulation", "Summary"]
 
@@ -63,6 +64,7 @@ class Summary:
     stable_dt: float | None               # explicit only: estimated critical step at rest
     per_step: dict = field(default_factory=dict)
     adapt: dict | None = None             # [[adapt]] rules: switches, splits and their events
+    topology: list | None = None          # [[cut]] / [[remove]] events applied: step, counts, seconds
     status: str = "ok"                    # ok | warnings | invalid | diverged | failed | interrupted
     message: str | None = None            # why the run is not "ok"/"warnings"
     warnings: list = field(default_factory=list)   # [{"step", "time", "kind", "message"}]
@@ -146,6 +148,9 @@ class Simulation:
         if threads is not None:                  # [solver] threads (or run --threads): the one switch
             _parallel.set_threads_from(threads, "solver.threads")
         self.adapter = Adapter(self.model) if self.model.adapt else None
+        events = getattr(self.model.scene, "topology", None) or []
+        # runtime.topology_events: [[cut]] / [[remove]], rehearsed on the rest mesh now
+        self.topology = TopologyEvents(self.model, events) if events else None
         self._u0, self._v0 = self._initial(u0), self._initial(v0)
         self.ctx = None
         self.stable_dt = None
@@ -299,6 +304,10 @@ class Simulation:
                 self._adapt(k)
                 integ, model = self.integrator, self.model      # refinement rebuilds both
                 self.monitor.model = model
+            if self.topology is not None and self.topology.due(k):
+                self._change_topology(k)
+                integ, model = self.integrator, self.model
+                self.monitor.model = model
             wall = time.perf_counter() - t0
             frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
             keep = self._history.keeps(k)
@@ -361,14 +370,15 @@ class Simulation:
                 return
             self.integrator.step(k)          # equilibrium of the adapted model at the same load
 
-    def _rebuild(self, model, parents) -> None:
-        """Carry the state and the counters over to a refined model (new pattern, masses, constants)."""
+    def _rebuild(self, model, parents, u=None, v=None) -> None:
+        """Carry the state and the counters over to a refined model (new pattern, masses, constants);
+        u, v: the new model's state when the caller has it (a topology change), else interpolated."""
         old, dim = self.ctx, model.dofs_per_node
         ctx = Context(model)
         model.warm_up()
         ctx.asm.warm_up()
-        ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel()
-        ctx.v = interpolate_nodal(old.v.reshape(-1, dim), parents).ravel()
+        ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel() if u is None else u
+        ctx.v = interpolate_nodal(old.v.reshape(-1, dim), parents).ravel() if v is None else v
         ctx.t = old.t
         ctx.newton_iterations, ctx.linear_iterations = old.newton_iterations, old.linear_iterations
         ctx.asm.time, ctx.linear.time = old.asm.time, old.linear.time
@@ -378,6 +388,20 @@ class Simulation:
             self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
         if self.writer is not None and hasattr(self.writer, "set_mesh"):
             self.writer.set_mesh(model.mesh)
+
+    def _change_topology(self, k: int) -> None:
+        """Apply the [[cut]] / [[remove]] events due after step k: a model changed only where the mesh
+        did (runtime.cutting), the state carried over exactly, a new assembly pattern and solver."""
+        ctx = self.ctx
+        changed = self.topology.apply(self.model, k, ctx.t, ctx.u, ctx.v)
+        if changed is None:
+            return
+        model, u, v = changed
+        start = time.perf_counter()
+        self._rebuild(model, None, u=u, v=v)
+        record = self.topology.records[-1]
+        record["seconds"]["solver"] = time.perf_counter() - start
+        record["seconds"]["total"] = sum(record["seconds"].values())
 
     def _energies(self, step: int, frame: bool = True) -> dict:
         """Elastic, kinetic and external work at the current state (not counted as assembly time).
@@ -471,6 +495,7 @@ class Simulation:
             probes=model.probe_values(ctx.u), energy=last.get("elastic"), kinetic_energy=last.get("kinetic"),
             stable_dt=self.stable_dt, per_step=h.to_dict(),
             adapt=None if self.adapter is None else self.adapter.summary(model),
+            topology=None if self.topology is None else self.topology.summary(),
             status=status, message=message, warnings=list(self.monitor.warnings),
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),

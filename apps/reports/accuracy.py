@@ -131,44 +131,95 @@ def _measure(scene, trace=True) -> tuple:
     return summary, peak
 
 
-def _builtin(quick, progress, sweep) -> tuple:
+def _cantilever_combo(element, law, quad, levels) -> tuple:
+    """One combination of the cantilever sweep (a task: apps/batch.map_tasks): warm-up on the coarsest
+    mesh (compilation, timed apart), then every level; (rows, compile seconds, progress lines)."""
+    rows, lines = [], []
+    t0 = time.perf_counter()
+    _measure(cantilever_scene(element, law, quad, levels[0]), trace=False)    # warm-up: compile
+    compile_s = time.perf_counter() - t0
+    for cells in levels:
+        summary, peak = _measure(cantilever_scene(element, law, quad, cells))
+        w = -float(summary.probes["tip"][2])
+        rows.append(result_row(element, law, quad, cells, summary, peak, w))
+        lines.append(f"  {element:<10} {law:<5} {quad:<6} cells {rows[-1]['cells']:<8} dofs {rows[-1]['dofs']:>6}  "
+                     f"tip {w:.5g} m  total {summary.time['total']:.3f} s")
+    return rows, compile_s, lines
+
+
+def _cantilever_reference(ref_cells) -> tuple:
+    """The numerical reference of the cantilever sweep (a task): (tip, free dofs, seconds, progress lines)."""
+    _measure(cantilever_scene("tetra10", "hooke", "gauss2", [6, 1, 1]), trace=False)
+    summary, _ = _measure(cantilever_scene("tetra10", "hooke", "gauss2", ref_cells), trace=False)
+    return (-float(summary.probes["tip"][2]), summary.n_free_dofs, summary.time["total"],
+            [f"reference: tetra10 hooke gauss2 cells {'x'.join(map(str, ref_cells))} ..."])
+
+
+def _benchmark_task(name, quick, sweep) -> tuple:
+    """One of the other built-in benchmarks as a task: (its result dict, its progress lines)."""
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss}
+    lines = []
+    return BENCHMARKS[name](quick, lines.append, sweep), lines
+
+
+def _case(kind, *args):
+    """The task function of the accuracy sweep's cases (module level: dask pickles it by name)."""
+    return {"combo": _cantilever_combo, "reference": _cantilever_reference, "benchmark": _benchmark_task}[kind](*args)
+
+
+def _builtin_tasks(quick, sweep) -> tuple:
+    """The cantilever sweep's tasks: (config, combinations, [task]); the reference first (the longest)."""
     cfg = copy.deepcopy(QUICK if quick else FULL)
     if sweep:
         cfg.update(sweep)
-    eb, timo = analytic_tip()
-    rows, compile_s = [], {}
     combos = [(e, l, q) for e in cfg["elements"] for l in cfg["laws"]
               for q in cfg["quadratures"].get(e, ["gauss2"])]
-    progress(f"accuracy: cantilever under self weight, {len(combos)} element/law/quadrature combinations; "
-             f"analytic tip deflection {timo:.5g} m (Euler-Bernoulli {eb:.5g} m + shear)")
-    for element, law, quad in combos:
-        levels = cfg["levels_quadratic"] if element in QUADRATIC else cfg["levels"]
-        t0 = time.perf_counter()
-        _measure(cantilever_scene(element, law, quad, levels[0]), trace=False)    # warm-up: compile
-        compile_s[(element, law, quad)] = time.perf_counter() - t0
-        for cells in levels:
-            summary, peak = _measure(cantilever_scene(element, law, quad, cells))
-            w = -float(summary.probes["tip"][2])
-            rows.append(result_row(element, law, quad, cells, summary, peak, w))
-            progress(f"  {element:<10} {law:<5} {quad:<6} cells {rows[-1]['cells']:<8} dofs {rows[-1]['dofs']:>6}  "
-                     f"tip {w:.5g} m  total {summary.time['total']:.3f} s")
+    tasks = [("reference", cfg["reference"])]
+    tasks += [("combo", e, l, q, cfg["levels_quadratic"] if e in QUADRATIC else cfg["levels"]) for e, l, q in combos]
+    return cfg, combos, tasks
+
+
+def _builtin_result(cfg, outcomes) -> tuple:
+    """rows, reference, compile seconds of the cantilever sweep from its tasks' results (task order)."""
+    eb, timo = analytic_tip()
+    (w_ref, ref_dofs, ref_time, _), *combos = outcomes
+    rows, compile_s = [], {}
+    for (r, seconds, _), (element, law, quad) in combos:
+        rows += r
+        compile_s[(element, law, quad)] = seconds
     ref_cells = cfg["reference"]
-    progress(f"reference: tetra10 hooke gauss2 cells {'x'.join(map(str, ref_cells))} ...")
-    _measure(cantilever_scene("tetra10", "hooke", "gauss2", [6, 1, 1]), trace=False)
-    summary, _ = _measure(cantilever_scene("tetra10", "hooke", "gauss2", ref_cells), trace=False)
-    w_ref = -float(summary.probes["tip"][2])
     for r in rows:
         r["error_analytic"] = abs(r["value"] - timo) / timo
         r["error_reference"] = abs(r["value"] - w_ref) / abs(w_ref)
     reference = {
         "numerical": f"tetra10 / hooke / gauss2 on {'x'.join(map(str, ref_cells))} cells "
-                     f"({summary.n_free_dofs} free dofs, {summary.time['total']:.2f} s): tip deflection {w_ref:.6g} m",
+                     f"({ref_dofs} free dofs, {ref_time:.2f} s): tip deflection {w_ref:.6g} m",
         "analytic": f"Euler-Bernoulli {eb:.6g} m + Timoshenko shear term (kappa = 5/6) = {timo:.6g} m; "
                     f"the numerical reference differs from it by {abs(w_ref - timo) / timo:.2%}",
         "subject": "cantilever 1.2 x 0.2 x 0.2 m, rho = 800 kg/m^3, E = 100 MPa, nu = 0.3, clamped at x = 0, "
                    "gravity 9.81 m/s^2 along -z; value = tip deflection = -u_z at the centre of the free end",
     }
     return rows, reference, compile_s
+
+
+def _builtin(quick, progress, sweep, workers=1, scheduler=None) -> tuple:
+    """The cantilever sweep alone (its tasks through apps/batch.map_tasks)."""
+    cfg, combos, tasks = _builtin_tasks(quick, sweep)
+    outcomes = _map(tasks, progress, workers, scheduler)
+    return _builtin_result(cfg, [(outcomes[0]), *zip(outcomes[1:], combos)])
+
+
+def _map(tasks, progress, workers, scheduler) -> list:
+    """Run the tasks (apps/batch.map_tasks: in this process, or on dask), print each task's progress
+    lines in task order, return the results in task order (a task's exception propagates)."""
+    from ..batch import map_tasks
+
+    def show(i, outcome):
+        for line in outcome[1][-1]:
+            progress(line)
+    outcomes = map_tasks(_case, tasks, workers=workers, scheduler=scheduler, label="case", capture=False,
+                         progress=workers > 1 or scheduler is not None, on_result=show)
+    return [value for _, value in outcomes]
 
 
 def _settings(data, element, law, quad):
@@ -508,7 +559,8 @@ def _resolve(benchmarks) -> list:
 
 
 def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, _sweep: dict | None = None,
-                 benchmarks=None, elements=None, laws=None, quadratures=None, levels=None) -> list:
+                 benchmarks=None, elements=None, laws=None, quadratures=None, levels=None,
+                 workers: int = 1, scheduler: str | None = None) -> list:
     """Run the sweep and write results.csv, error_vs_time.png, convergence.png and report.md to out_dir.
 
     benchmarks: names from BENCHMARK_NAMES or "all" (default: cantilever); ignored with scene_path.
@@ -517,8 +569,12 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
     _sweep (tests): overrides of the sweep (cantilever: elements, laws, quadratures, levels,
     levels_quadratic, reference; user scene: factors; the other benchmarks: a dict under their
     name, see benchmarks.py).  Returns the result rows (dicts with COLUMNS and "main").
+    workers / scheduler: the built-in benchmarks' independent cases (each cantilever combination, its
+    reference, each other benchmark) run as tasks through apps/batch.map_tasks: in this process
+    (workers 1), or on a local dask cluster of that many single-threaded workers, or on the cluster at
+    scheduler; the rows come back in the same order with the same values (only the time_* and
+    peak_memory_mb columns are measurements). A SCENE sweep runs in this process.
     """
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss}
     progress = progress or (lambda *_: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -533,13 +589,26 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
         r, reference, compile_s, notes = _user_scene(scene_path, quick, progress, _sweep, settings)
         rows += r
         results["scene"] = {"reference": reference, "compile_s": compile_s, "notes": notes}
-    for name in names:
+    tasks, spans = [], {}
+    for name in names:                    # every case of every benchmark: one list of tasks
         if name == "cantilever":
-            sweep = {k: v for k, v in (_sweep or {}).items() if k not in BENCHMARKS}
-            r, reference, compile_s = _builtin(quick, progress, sweep)
+            sweep = {k: v for k, v in (_sweep or {}).items() if k not in BENCHMARK_NAMES}
+            cfg, combos, more = _builtin_tasks(quick, sweep)
+            eb, timo = analytic_tip()
+            progress(f"accuracy: cantilever under self weight, {len(combos)} element/law/quadrature combinations; "
+                     f"analytic tip deflection {timo:.5g} m (Euler-Bernoulli {eb:.5g} m + shear)")
+        else:
+            more = [("benchmark", name, quick, (_sweep or {}).get(name))]
+        spans[name] = (len(tasks), len(tasks) + len(more))
+        tasks += more
+    outcomes = _map(tasks, progress, workers, scheduler) if tasks else []
+    for name in names:
+        got = outcomes[slice(*spans[name])]
+        if name == "cantilever":
+            r, reference, compile_s = _builtin_result(cfg, [got[0], *zip(got[1:], combos)])
             results[name] = {"reference": reference, "compile_s": compile_s, "notes": []}
         else:
-            res = BENCHMARKS[name](quick, progress, (_sweep or {}).get(name))
+            res = got[0][0]
             r = res["rows"]
             results[name] = res
         rows += r
@@ -569,8 +638,31 @@ def cmd_accuracy(args) -> int:
     for key in ("elements", "laws", "quadratures", "levels"):
         if getattr(args, key, None) is not None:
             kwargs[key] = getattr(args, key)
+    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    if workers > 1 or scheduler is not None:      # only then: the defaults are run_accuracy's own
+        kwargs.update(workers=workers, scheduler=scheduler)
     run_accuracy(args.out, scene_path=args.scene, quick=args.quick, **kwargs)
     return 0
+
+
+def _workers(args) -> int:
+    workers = getattr(args, "workers", None) or 1
+    if workers < 1:
+        raise TensormassError(f"--workers must be at least 1, got {workers}")
+    if workers > 1 or getattr(args, "scheduler", None):
+        from ..batch import DASK_MISSING, dask_available
+        if not dask_available():
+            raise TensormassError(DASK_MISSING)
+    return workers
+
+
+def add_workers_options(p) -> None:
+    """--workers N / --scheduler ADDRESS of the reports (apps/batch.map_tasks)."""
+    p.add_argument("--workers", type=int, metavar="N", default=None,
+                   help="run the independent cases on a local dask cluster of N single-threaded worker processes "
+                        "(default 1: in this process; the results are the same, only timings differ)")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="run the independent cases on an existing dask cluster (tcp://host:8786)")
 
 
 def add_accuracy_command(subparsers) -> None:
@@ -595,4 +687,5 @@ def add_accuracy_command(subparsers) -> None:
                         "times (default 3, 2 with --quick)")
     p.add_argument("--quick", action="store_true", help="a small sweep (well under 2 minutes)")
     p.add_argument("--out", required=True, help="output folder")
+    add_workers_options(p)
     p.set_defaults(run=cmd_accuracy)

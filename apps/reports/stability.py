@@ -511,24 +511,40 @@ def _report_text(rows, quick, total) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_stability(out_dir, quick=False, progress=print) -> list:
-    """Run every case, write stability.csv and report.md into out_dir; the rows (dicts) are returned."""
+def _run_case(index, quick) -> tuple:
+    """CASES[index] as a task (apps/batch.map_tasks): (its rows, seconds); a bug in a case is a row."""
+    case = CASES[index]
+    t0 = time.perf_counter()
+    try:
+        got = case(quick)
+    except Exception as exc:      # a bug in a case must not lose the others' results
+        row = {c: "" for c in COLUMNS}
+        row.update(case=case.__name__, outcome=f"refused (report error: {_short(exc)})",
+                   expected="the case runs", ok=False, message=_clean(f"{type(exc).__name__}: {exc}"))
+        got = [row]
+    return got, time.perf_counter() - t0
+
+
+def run_stability(out_dir, quick=False, progress=print, workers: int = 1, scheduler: str | None = None) -> list:
+    """Run every case, write stability.csv and report.md into out_dir; the rows (dicts) are returned.
+
+    workers / scheduler: the cases run as independent tasks through apps/batch.map_tasks (in this
+    process with workers 1, else on dask); rows in CASES order, the same outcomes; only wall_time
+    (and the times in report.md) are measurements."""
+    from ..batch import map_tasks
     out = Path(out_dir)
     start = time.perf_counter()
     rows = []
-    for case in CASES:
-        t0 = time.perf_counter()
-        try:
-            got = case(quick)
-        except Exception as exc:      # a bug in a case must not lose the others' results
-            row = {c: "" for c in COLUMNS}
-            row.update(case=case.__name__, outcome=f"refused (report error: {_short(exc)})",
-                       expected="the case runs", ok=False, message=_clean(f"{type(exc).__name__}: {exc}"))
-            got = [row]
-        rows.extend(got)
+
+    def show(i, outcome):
+        got, seconds = outcome[1]
         if progress is not None:
             summary = ", ".join(f"{r['law']}: {r['outcome']}{'' if r['ok'] else ' (NOT ok)'}" for r in got)
-            progress(f"{case.__name__[5:]:>14s} {time.perf_counter() - t0:6.1f} s  {_short(summary, 200)}")
+            progress(f"{CASES[i].__name__[5:]:>14s} {seconds:6.1f} s  {_short(summary, 200)}")
+    outcomes = map_tasks(_run_case, [(i, quick) for i in range(len(CASES))], workers=workers, scheduler=scheduler,
+                         label="case", capture=False, progress=workers > 1 or scheduler is not None, on_result=show)
+    for _, (got, _) in outcomes:
+        rows.extend(got)
     total = time.perf_counter() - start
     write_text_atomic(out / "stability.csv", _csv_text(rows))
     write_text_atomic(out / "report.md", _report_text(rows, quick, total))
@@ -540,7 +556,10 @@ def run_stability(out_dir, quick=False, progress=print) -> list:
 
 
 def _cmd_stability(args) -> int:
-    rows = run_stability(args.out, quick=args.quick)
+    from .accuracy import _workers
+    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    extra = {"workers": workers, "scheduler": scheduler} if workers > 1 or scheduler is not None else {}
+    rows = run_stability(args.out, quick=args.quick, **extra)
     return 0 if rows and all(r["ok"] for r in rows) else 1
 
 
@@ -548,4 +567,6 @@ def add_stability_command(subparsers) -> None:
     p = subparsers.add_parser("stability", help="stiff and extreme cases: stable, recovered, diverged or refused")
     p.add_argument("--quick", action="store_true", help="fewer values and steps (< 1 minute)")
     p.add_argument("--out", required=True, help="output folder for stability.csv and report.md")
+    from .accuracy import add_workers_options
+    add_workers_options(p)
     p.set_defaults(run=_cmd_stability)

@@ -1,0 +1,599 @@
+"""`tensormass batch`: studies at scale, scene files x parameter variations as independent tasks.
+
+    tensormass batch a.toml b.toml --vary material.0.E=1e6,1e7 --vary mesh.cells=[4,1,1],[8,2,2] \\
+        [--workers N] [--scheduler tcp://host:8786] [--out table.csv]
+
+Every scene file x every combination of the --vary values (a cartesian product, in the order
+given) is one task: the scene's TOML is read, the variation written into the parsed dict
+(dotted keys, list indices as numbers: ``material.0.E``) before validation, so a bad key or
+value gives the scene parser's own SceneError naming it; the scene runs without writing any
+output and the task returns one flat row (``run_task``). Rows come back in task order (never
+completion order), so a table does not depend on the workers; a run is bit-identical in any
+process (the runtime's assembly does not depend on threads), and floats are written with
+repr() so that the table shows it.
+
+The tasks run through ``map_tasks``: in this process one after the other (``--workers 1`` and
+no scheduler: dask is not needed), or on dask.distributed, a LocalCluster of N single-threaded
+worker processes (BLAS / OpenMP / numba at one thread each: set in the workers' environment
+before they start, and again by every task) or an existing cluster (``--scheduler``). The
+reports (apps/reports accuracy and stability) map their sweep cases through the same function.
+
+Kernel caches: the first task of a process that needs a kernel loads (generates, compiles,
+numba-compiles) it under a file lock per kernel in the cache folder (``kernel_locks``), so
+concurrent workers generate and compile a kernel once and the others wait, then load it.
+"""
+from __future__ import annotations
+
+import contextlib
+import csv
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_OK, RunStopped, SceneError,
+                              TensormassError)
+from ..runtime.output import write_bytes_atomic, write_text_atomic
+
+__all__ = ["parse_vary", "split_values", "apply_override", "plan_tasks", "run_task", "map_tasks",
+           "run_batch", "write_table", "add_batch_command", "THREAD_ENV", "TIMING_COLUMNS", "DASK_MISSING",
+           "kernel_locks", "worker_environment"]
+
+# One thread per worker for every pool a task may start (set before numpy / numba are imported).
+THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "NUMBA_NUM_THREADS": "1", "TENSORMASS_THREADS": "1"}
+# Columns that measure time: they differ between two runs of the same study (tests skip them).
+TIMING_COLUMNS = ("wall_time", "time_total")
+DASK_MISSING = ('dask.distributed is not installed: --workers above 1 and --scheduler need it; '
+                'install it with: pip install "tensormass[distributed]" (or run with --workers 1)')
+MEMORY_MARGIN = 1.5          # a worker's memory limit: this x the largest task's estimate ...
+MEMORY_FLOOR = 1 << 30       # ... and no less than this (the dask worker itself, imports, a spread)
+HEALTH_KEYS = ("min_det_F", "min_det_F_final", "inverted_final", "max_relative_displacement",
+               "max_energy_growth", "energy_scale")
+
+
+# ============================================================================== variations
+
+
+def split_values(text: str) -> list:
+    """'1,2,[3,4]' -> ['1', '2', '[3,4]']: commas inside brackets, braces or quotes do not split."""
+    parts, depth, quote, start = [], 0, None, 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+            if depth < 0:
+                raise ValueError(f"unbalanced ']' or '}}' in {text!r}")
+        elif ch == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    if depth or quote:
+        raise ValueError(f"unclosed bracket or quote in {text!r}")
+    parts.append(text[start:])
+    return [p.strip() for p in parts]
+
+
+def parse_value(text: str):
+    """A value as TOML reads it (1e6, [8, 2, 2], true, "x"); a bare word is a string (hooke)."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        if any(ch in text for ch in "[]{}\"'=") or not text:
+            raise ValueError(f"cannot read {text!r} as a TOML value") from None
+        return text
+
+
+def parse_vary(items) -> list:
+    """['material.0.E=1e6,1e7', ...] -> [('material.0.E', [1000000.0, 10000000.0]), ...]; errors name the item."""
+    out, seen = [], set()
+    for item in items or ():
+        key, sep, values = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise TensormassError(f"--vary {item!r}: expected KEY=V1,V2,... (e.g. material.0.E=1e6,1e7)")
+        if any(not part for part in key.split(".")):
+            raise TensormassError(f"--vary {item!r}: key {key!r} has an empty part")
+        if key in seen:
+            raise TensormassError(f"--vary {key}: given twice")
+        seen.add(key)
+        try:
+            parsed = [parse_value(v) for v in split_values(values)]
+        except ValueError as exc:
+            raise TensormassError(f"--vary {key}: {exc}") from None
+        out.append((key, parsed))
+    return out
+
+
+def apply_override(data: dict, key: str, value) -> None:
+    """Write value at a dotted key of a parsed scene (list indices as numbers); a missing table on
+    the way is created (the scene parser then judges the key), a path that cannot exist is refused."""
+    parts = key.split(".")
+    node = data
+    for depth, part in enumerate(parts):
+        last = depth == len(parts) - 1
+        where = ".".join(parts[:depth]) or "the scene"
+        if isinstance(node, list):
+            if not part.isdigit():
+                raise SceneError(f"--vary {key}: {where} is a list ([[{where}]] entries); index it with a number")
+            index = int(part)
+            if index >= len(node):
+                raise SceneError(f"--vary {key}: {where} has {len(node)} entr{'y' if len(node) == 1 else 'ies'} "
+                                 f"(indices from 0)")
+            if last:
+                node[index] = value
+            else:
+                node = node[index]
+        elif isinstance(node, dict):
+            if last:
+                node[part] = value
+            else:
+                node = node.setdefault(part, {})
+        else:
+            raise SceneError(f"--vary {key}: {where} is a value ({node!r}), not a table or a list")
+
+
+def plan_tasks(scenes, vary) -> list:
+    """Every scene x the cartesian product of the variations: [{'task', 'scene', 'values'}], in order."""
+    keys = [k for k, _ in vary]
+    combos = list(itertools.product(*[v for _, v in vary])) if vary else [()]
+    return [{"task": i, "scene": str(s), "values": dict(zip(keys, combo))}
+            for i, (s, combo) in enumerate(itertools.product(scenes, combos))]
+
+
+def load_scene(path, values, load_mesh=True, max_memory=None):
+    """The scene of one task: the file's TOML with the variation written in, validated."""
+    from ..runtime.scene import Scene
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"scene file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"cannot read scene file {path}: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: invalid TOML: {exc}") from None
+    for key, value in values.items():
+        apply_override(data, key, _copy(value))
+    data.setdefault("name", path.stem)
+    scene = Scene.from_dict(data, base_dir=path.parent, load_mesh=load_mesh, max_memory=max_memory)
+    scene.source = str(path)
+    return scene
+
+
+def _copy(value):
+    return json.loads(json.dumps(value)) if isinstance(value, (list, dict)) else value
+
+
+# ============================================================================== one task
+
+
+_WARMED: set = set()      # kernel keys this process has loaded (and compiled) already
+
+
+def _lock_folder() -> Path | None:
+    from ..runtime.cache import cache_dir
+    folder = cache_dir() / "locks"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    return folder
+
+
+@contextlib.contextmanager
+def kernel_locks(keys):
+    """Hold an exclusive file lock per kernel key (sorted: no two processes wait on each other in a
+    cycle) in <cache>/locks: the holder generates / compiles, the others wait and then load it
+    from the cache. Without fcntl or a writable cache, no lock (the caches are still atomic)."""
+    try:
+        import fcntl
+    except ImportError:            # not POSIX
+        yield
+        return
+    folder = _lock_folder()
+    if folder is None:
+        yield
+        return
+    with contextlib.ExitStack() as stack:
+        for key in sorted(set(keys), key=repr):
+            name = hashlib.sha256(repr(key).encode()).hexdigest()[:20] + ".lock"
+            handle = stack.enter_context(open(folder / name, "a+b"))
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+            stack.callback(fcntl.flock, handle.fileno(), fcntl.LOCK_UN)
+        yield
+
+
+def _simulation(scene):
+    """Simulation(scene, output=False) with its kernels loaded and compiled: under the kernels'
+    locks the first time this process needs them (see kernel_locks)."""
+    from ..runtime.model import Model
+    from ..runtime.simulation import Simulation
+    try:
+        keys = {(k, scene.solver.backend) for k in Model.required_kernels(scene)}
+    except Exception:              # noqa: BLE001 - the Simulation below reports the scene's problem
+        keys = set()
+    fresh = keys - _WARMED
+    if not fresh:
+        return Simulation(scene, output=False)
+    with kernel_locks(fresh):
+        sim = Simulation(scene, output=False)
+        sim.model.warm_up()
+    _WARMED.update(fresh)
+    return sim
+
+
+def _limit_threads(threads):
+    """threads=1 (a worker): the runtime, numba and BLAS at one thread; None: leave them be."""
+    if threads is None:
+        return contextlib.nullcontext()
+    from ..runtime import parallel
+    parallel.set_threads(threads)
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=threads)
+
+
+def _plain(value):
+    """A cell of the table: numbers as they are, lists and tables as compact JSON text."""
+    if isinstance(value, (list, tuple, dict)):
+        return json.dumps(value, separators=(",", ":"))
+    return value
+
+
+def run_task(spec: dict, threads=None, max_memory=None) -> dict:
+    """Run one task ({'task', 'scene', 'values'}) without writing output; never raises: one flat row
+    (scene, the varied values, status, exit code, the probes' final values, the Summary's health
+    fields, error, wall time)."""
+    start = time.perf_counter()
+    row = {"task": spec["task"], "scene": spec["scene"]}
+    row.update({f"vary.{k}": _plain(v) for k, v in spec["values"].items()})
+    row.update(status="", exit_code=EXIT_OK, error="")
+    try:
+        with _limit_threads(threads):
+            scene = load_scene(spec["scene"], spec["values"], max_memory=max_memory)
+            sim = _simulation(scene)
+            try:
+                summary, stopped = sim.run(), None
+            except RunStopped as exc:
+                summary, stopped = exc.summary, exc
+        row.update(_summary_fields(summary))
+        if stopped is not None:
+            row["error"] = f"run {summary.status}: {stopped}"
+    except TensormassError as exc:
+        row.update(status="refused", exit_code=EXIT_BAD_INPUT, error=str(exc))
+    except (ArithmeticError, RuntimeError, MemoryError, OSError) as exc:
+        row.update(status="failed", exit_code=EXIT_BAD_INPUT, error=f"{type(exc).__name__}: {exc}")
+    except Exception as exc:      # noqa: BLE001 - a bug in one task must not lose the study
+        row.update(status="error", exit_code=EXIT_INTERNAL, error=f"internal error: {type(exc).__name__}: {exc}")
+    row["wall_time"] = time.perf_counter() - start
+    return row
+
+
+def _summary_fields(summary) -> dict:
+    """The Summary's status and health numbers, flat (probe components as probe.NAME.0, .1, ...)."""
+    d = summary.to_dict()
+    out = {"status": d["status"], "exit_code": d["exit_code"], "message": d.get("message") or "",
+           "steps": d["steps"], "steps_done": d["steps_done"], "n_dofs": d["n_dofs"],
+           "n_elements": d["n_elements"], "newton_iterations": (d.get("iterations") or {}).get("newton"),
+           "linear_iterations": (d.get("iterations") or {}).get("linear"), "energy": d.get("energy"),
+           "kinetic_energy": d.get("kinetic_energy"), "warnings": len(d.get("warnings") or [])}
+    health = d.get("health") or {}
+    out.update({f"health.{k}": health.get(k) for k in HEALTH_KEYS if k in health})
+    for name, u in (d.get("probes") or {}).items():
+        for i, x in enumerate(u):
+            out[f"probe.{name}.{i}"] = float(x)
+    for name, r in (d.get("reactions") or {}).items():
+        for i, x in enumerate(r.get("force") or ()):
+            out[f"reaction.{name}.force.{i}"] = float(x)
+    out["time_total"] = (d.get("time") or {}).get("total")
+    return out
+
+
+# ============================================================================== the engine
+
+
+def _dask():
+    try:
+        import distributed
+    except ImportError:
+        raise TensormassError(DASK_MISSING) from None
+    return distributed
+
+
+def dask_available() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def worker_environment():
+    """THREAD_ENV in os.environ while the LocalCluster spawns its workers (they inherit it before
+    importing anything), restored after."""
+    old = {k: os.environ.get(k) for k in THREAD_ENV}
+    os.environ.update(THREAD_ENV)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def memory_limit(estimates, workers: int) -> int | None:
+    """Bytes per worker: the largest task's estimate x MEMORY_MARGIN (at least MEMORY_FLOOR), no
+    more than the machine's available memory / workers; None when nothing is known."""
+    from ..runtime.resources import available_memory
+    avail = available_memory()
+    cap = avail // max(workers, 1) if avail else None
+    known = [e for e in estimates if e]
+    want = max(MEMORY_FLOOR, int(MEMORY_MARGIN * max(known))) if known else None
+    if want is None:
+        return cap
+    return want if cap is None else min(want, cap)
+
+
+class _Counter:
+    """'label k/n' on stderr (redrawn on a terminal): the study's progress."""
+
+    def __init__(self, n, label, stream=None):
+        from .commands import ProgressBar
+        self.n, self.bar = n, ProgressBar(stream=stream if stream is not None else sys.stderr, label=label)
+
+    def __call__(self, done):
+        self.bar(done, self.n)
+
+    def finish(self):
+        self.bar.finish()
+
+
+def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_limit: int | None = None,
+              label: str = "task", progress=True, on_result=None, capture: bool = True) -> list:
+    """[(True, fn(*item)) or (False, 'error text')] in the order of items, whatever order they finish in.
+
+    workers 1 and no scheduler: in this process, one after the other (no dask needed). Otherwise
+    dask.distributed: a Client of `scheduler`, else a LocalCluster of `workers` single-threaded
+    processes (THREAD_ENV, mem_limit bytes each). on_result(i, outcome) is called in item order
+    as soon as the results up to i are in (to print a task's output in order). capture=False: a
+    task's exception propagates (the first in item order that the engine sees), as it would in a loop."""
+    items = [tuple(it) for it in items]
+    counter = _Counter(len(items), label) if progress and items else None
+    results: list = [None] * len(items)
+    shown = 0
+
+    def _flush():
+        nonlocal shown
+        while shown < len(items) and results[shown] is not None:
+            if on_result is not None:
+                on_result(shown, results[shown])
+            shown += 1
+    try:
+        if scheduler is None and workers <= 1:
+            for i, item in enumerate(items):
+                try:
+                    results[i] = (True, fn(*item))
+                except Exception as exc:     # noqa: BLE001 - the caller decides what a failure means
+                    if not capture:
+                        raise
+                    results[i] = (False, f"{type(exc).__name__}: {exc}")
+                if counter:
+                    counter(i + 1)
+                _flush()
+            return results
+        distributed = _dask()
+        with _client(distributed, workers, scheduler, mem_limit) as client:
+            futures = [client.submit(fn, *item, pure=False, key=f"{label}-{i}-{os.getpid()}-{time.time_ns()}")
+                       for i, item in enumerate(items)]
+            index = {f.key: i for i, f in enumerate(futures)}
+            done = 0
+            for future in distributed.as_completed(futures):
+                i = index[future.key]
+                try:
+                    results[i] = (True, future.result())
+                except Exception as exc:     # noqa: BLE001 - KilledWorker (memory), pickling, the task's own
+                    if not capture:
+                        raise
+                    results[i] = (False, f"{type(exc).__name__}: {exc}")
+                done += 1
+                if counter:
+                    counter(done)
+                _flush()
+        return results
+    finally:
+        if counter:
+            counter.finish()
+
+
+@contextlib.contextmanager
+def _client(distributed, workers, scheduler, mem_limit):
+    import logging
+    logging.getLogger("distributed").setLevel(logging.ERROR)     # one line per event is noise here
+    if scheduler is not None:
+        try:
+            client = distributed.Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise TensormassError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        with client:
+            yield client
+        return
+    with worker_environment():
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           memory_limit=mem_limit if mem_limit else "auto",
+                                           dashboard_address=None, env=dict(THREAD_ENV))
+    with cluster, distributed.Client(cluster) as client:
+        yield client
+
+
+def worker_info() -> dict:
+    """What a worker runs with (tests check the one-thread defaults): environment, numba and BLAS threads."""
+    import numba
+    from threadpoolctl import threadpool_info
+    return {"env": {k: os.environ.get(k) for k in THREAD_ENV}, "numba_threads": numba.get_num_threads(),
+            "blas_threads": sorted({p["num_threads"] for p in threadpool_info()}), "pid": os.getpid()}
+
+
+# ============================================================================== the table
+
+
+def _columns(rows) -> list:
+    cols: dict = {}
+    for r in rows:
+        for k in r:
+            cols.setdefault(k, None)
+    return list(cols)
+
+
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else str(value)
+    return str(value)
+
+
+def csv_text(rows) -> str:
+    cols = _columns(rows)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow([_cell(r.get(c)) for c in cols])
+    return buf.getvalue()
+
+
+def write_table(rows, out) -> list:
+    """out (CSV) and, with pyarrow, out with .parquet, each atomically; the paths written (a note
+    on stderr when pyarrow is missing)."""
+    out = Path(out)
+    write_text_atomic(out, csv_text(rows))
+    written = [out]
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        print("batch: pyarrow is not installed: wrote the CSV only (pip install pyarrow for Parquet)",
+              file=sys.stderr)
+        return written
+    columns = {}
+    for c in _columns(rows):
+        values = [r.get(c) for r in rows]
+        try:
+            columns[c] = pa.array(values)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            columns[c] = pa.array([None if v is None else _cell(v) for v in values], type=pa.string())
+    buf = pa.BufferOutputStream()
+    pq.write_table(pa.table(columns), buf)
+    parquet = out.with_suffix(".parquet")
+    write_bytes_atomic(parquet, buf.getvalue().to_pybytes())
+    return written + [parquet]
+
+
+# ============================================================================== the command
+
+
+def _default_workers(n_tasks: int) -> int:
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, n_tasks))
+
+
+def _estimates(tasks) -> list:
+    """Each task's peak memory estimate (runtime.resources) in bytes, None where it cannot be made
+    (the task itself will report why)."""
+    from ..runtime.resources import estimate
+    out = []
+    for t in tasks:
+        try:
+            out.append(estimate(load_scene(t["scene"], t["values"], load_mesh=False)).bytes)
+        except Exception:          # noqa: BLE001 - a scene that does not load fails in its task
+            out.append(None)
+    return out
+
+
+def run_batch(scenes, vary=(), workers=None, scheduler=None, out="batch.csv", stream=None, progress=True) -> tuple:
+    """Plan, run and tabulate a study; returns (rows, exit code). See the module docstring."""
+    stream = stream if stream is not None else sys.stderr
+    tasks = plan_tasks(scenes, parse_vary(vary) if vary and isinstance(vary[0], str) else list(vary))
+    explicit = workers is not None
+    workers = _default_workers(len(tasks)) if workers is None else int(workers)
+    if workers < 1:
+        raise TensormassError(f"--workers must be at least 1, got {workers}")
+    if (workers > 1 or scheduler) and not dask_available():
+        if explicit or scheduler:
+            raise TensormassError(DASK_MISSING)
+        print(f"batch: dask.distributed is not installed: running sequentially "
+              f'(pip install "tensormass[distributed]" for {workers} workers)', file=stream)
+        workers = 1
+    distributed = workers > 1 or scheduler is not None
+    limit = memory_limit(_estimates(tasks), workers) if distributed and scheduler is None else None
+    where = (f"cluster {scheduler}" if scheduler else
+             f"{workers} worker processes, 1 thread each" + (f", {limit / 2 ** 30:.2f} GiB each" if limit else "")
+             if distributed else "this process, one task after the other")
+    print(f"batch: {len(tasks)} task(s) ({len(scenes)} scene(s)) on {where}", file=stream)
+    start = time.perf_counter()
+    outcomes = map_tasks(run_task, [(t, 1 if distributed else None) for t in tasks], workers=workers,
+                         scheduler=scheduler, mem_limit=limit, label="task", progress=progress)
+    rows = []
+    for t, (ok, value) in zip(tasks, outcomes):
+        if ok:
+            rows.append(value)
+        else:                      # the task never ran to its end (worker killed, e.g. over its memory)
+            row = {"task": t["task"], "scene": t["scene"], **{f"vary.{k}": _plain(v) for k, v in t["values"].items()}}
+            row.update(status="error", exit_code=EXIT_INTERNAL, error=f"task lost: {value}")
+            rows.append(row)
+    written = write_table(rows, out)
+    failed = [r for r in rows if r["exit_code"] != EXIT_OK]
+    print(f"batch: {len(rows) - len(failed)}/{len(rows)} task(s) ok in {time.perf_counter() - start:.1f} s; "
+          f"wrote {', '.join(map(str, written))}", file=stream)
+    if failed:
+        print(f"batch: {len(failed)} task(s) failed:", file=stream)
+        for r in failed:
+            values = " ".join(f"{k[5:]}={r[k]}" for k in r if k.startswith("vary."))
+            print(f"  [{r['task']}] {r['scene']}{' ' + values if values else ''}: {r['status']} "
+                  f"(exit {r['exit_code']}): {r['error']}", file=stream)
+    return rows, max((r["exit_code"] for r in failed), default=EXIT_OK)
+
+
+def cmd_batch(args) -> int:
+    _, code = run_batch(args.scenes, args.vary or (), workers=args.workers, scheduler=args.scheduler,
+                        out=args.out, progress=not args.quiet)
+    return code
+
+
+def add_batch_command(subparsers) -> None:
+    p = subparsers.add_parser("batch", help="run scene files x parameter variations as independent tasks "
+                                            "(dask.distributed) into one table")
+    p.add_argument("scenes", nargs="+", help="scene files (.toml)")
+    p.add_argument("--vary", action="append", metavar="KEY=V1,V2,...",
+                   help="a dotted scene key and its values (TOML; commas inside brackets do not split), e.g. "
+                        "material.0.E=1e6,1e7 or mesh.cells=[4,1,1],[8,2,2]; repeat for a cartesian product")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of a local dask cluster (default: the cores, at most the tasks); "
+                        "1: in this process, without dask")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing dask cluster (tcp://host:8786)")
+    p.add_argument("--out", default="batch.csv", help="the table (CSV; also .parquet with pyarrow); default batch.csv")
+    p.add_argument("--quiet", action="store_true", help="no progress counter")
+    p.set_defaults(run=cmd_batch)

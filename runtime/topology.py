@@ -1,0 +1,509 @@
+"""Topology changes of a solid mesh during a run: separating cells along faces, removing cells.
+
+    pairs = plane_pairs(mesh, point, normal, box)      # cells facing each other across a plane
+    split = separate(mesh, pairs)                       # unsew them: nodes duplicated, cells renumbered
+    mesh2 = split.apply(mesh)                           # the new mesh (the old one is left untouched)
+    gone = removal(mesh, cell_ids)                      # removing cells (ablation, resection)
+
+The data structure is the mesh itself (point and cell arrays, VTK node order) plus a node -> cell
+incidence built on demand in linear time (`incidence`).  We considered a combinatorial map
+(darts and involutions, as in the thesis' chapter 5, or CGAL's / OpenVolumeMesh's half-face
+structures): they make local queries O(1) but need a dart per (cell, face, edge) — about 24
+darts per tetrahedron — kept in sync with every array the solver reads, and no well-kept Python
+package provides one for mixed 3D cells.  A cut here only needs, for every node on the cut,
+which of the cells around it stay connected once the cut faces are opened; that is a few sorts
+over the cells around those nodes, so the arrays stay the single source of truth.
+
+Separating (the cut surface is a set of interior faces, each given by the two cells it joins):
+for every node of a cut face, the cells around the node are grouped into the components that
+stay joined through faces containing the node that are not cut.  The component holding the
+cell of lowest id keeps the node; every other component gets a new node (a copy of its rest
+position, appended after the existing points) that replaces the old one in its cells.  A node
+on the edge of an incision inside the body keeps one component and is not duplicated: the
+incision opens everywhere but along its front.  Cell ids do not change; per-element constants
+do not change either (the rest geometry of every cell is the same).
+
+Removal takes cells out of the mesh; the cells after them shift down (`Removal.new_ids`).
+Nodes no cell uses any more stay in the point array (the solver pins them).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .. import elements as _types
+from .errors import TensormassError
+from .mesh import CellBlock, Mesh
+
+__all__ = ["TopologyError", "Incidence", "incidence", "face_owners", "plane_pairs", "box_cells", "separate", "Split",
+           "removal", "Removal", "check_topology"]
+
+
+class TopologyError(TensormassError):
+    """A topology change that cannot be applied (it names what is wrong)."""
+
+
+def _offsets(mesh: Mesh) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
+
+
+def _solid_mesh(mesh: Mesh, what: str) -> None:
+    flat = sorted({b.type for b in mesh.blocks if _types.get(b.type).dim != mesh.dim})
+    if flat:
+        raise TopologyError(f"{what}: only solid cells (tetrahedra, hexahedra, ... in 3D; triangles, quads in 2D) "
+                            f"can be cut or removed here; the mesh has {', '.join(flat)} cells")
+
+
+# --------------------------------------------------------------------------- incidence
+
+
+@njit(cache=True)
+def _count_sort(flat, n_points):
+    """(ptr, order): order lists the positions in `flat` grouped by node, in increasing position."""
+    ptr = np.zeros(n_points + 1, dtype=np.int64)
+    for v in flat:
+        ptr[v + 1] += 1
+    for i in range(n_points):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    order = np.empty(flat.size, dtype=np.int64)
+    for j in range(flat.size):
+        v = flat[j]
+        order[fill[v]] = j
+        fill[v] += 1
+    return ptr, order
+
+
+@dataclass
+class Incidence:
+    """Node -> (global cell id, local node index) lists: entries ptr[n]:ptr[n + 1], cells in increasing id."""
+    ptr: np.ndarray
+    cell: np.ndarray
+    local: np.ndarray
+
+    def of(self, nodes: np.ndarray) -> tuple:
+        """(node, cell, local) of every incidence of the given nodes (node by node)."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        counts = self.ptr[nodes + 1] - self.ptr[nodes]
+        starts = np.repeat(self.ptr[nodes] - np.cumsum(counts) + counts, counts)
+        at = starts + np.arange(counts.sum())
+        return np.repeat(nodes, counts), self.cell[at], self.local[at]
+
+
+def incidence(mesh: Mesh) -> Incidence:
+    """The node -> cell incidence of every block, in linear time (a counting sort)."""
+    flats, cells, locals_ = [], [], []
+    for off, blk in zip(_offsets(mesh), mesh.blocks):
+        n, k = blk.cells.shape
+        flats.append(blk.cells.ravel())
+        cells.append(np.repeat(off + np.arange(n, dtype=np.int64), k))
+        locals_.append(np.tile(np.arange(k, dtype=np.int64), n))
+    flat = np.concatenate(flats) if flats else np.zeros(0, np.int64)
+    ptr, order = _count_sort(flat, mesh.n_points)
+    return Incidence(ptr, np.concatenate(cells)[order], np.concatenate(locals_)[order])
+
+
+def _locate(mesh: Mesh, cell_ids: np.ndarray) -> tuple:
+    """(block index, row in block) of global cell ids."""
+    off = _offsets(mesh)
+    block = np.searchsorted(off, cell_ids, side="right") - 1
+    return block, cell_ids - off[block]
+
+
+def _cell_nodes(mesh: Mesh, cell_ids: np.ndarray) -> list:
+    block, row = _locate(mesh, cell_ids)
+    return [mesh.blocks[b].cells[r] for b, r in zip(block, row)]
+
+
+def face_owners(mesh: Mesh, faces: np.ndarray, inc: Incidence | None = None) -> np.ndarray:
+    """The cell owning each boundary face (n, kf): the cell around its first node holding all of
+    its nodes (-1: none)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return np.zeros(0, dtype=np.int64)
+    faces = faces.reshape(len(faces), -1)
+    inc = incidence(mesh) if inc is None else inc
+    off = _offsets(mesh)
+    owners = np.full(len(faces), -1, dtype=np.int64)
+    for i, f in enumerate(faces):
+        a = int(f[0])
+        for c in inc.cell[inc.ptr[a]:inc.ptr[a + 1]]:
+            b = int(np.searchsorted(off, c, side="right") - 1)
+            if np.isin(f, mesh.blocks[b].cells[c - off[b]]).all():
+                owners[i] = c
+                break
+    return owners
+
+
+# --------------------------------------------------------------------------- choosing faces
+
+
+def _centroids(mesh: Mesh, block: CellBlock) -> np.ndarray:
+    el = _types.get(block.type)
+    return mesh.points[block.cells[:, :el.n_corners]].mean(axis=1)
+
+
+def box_cells(mesh: Mesh, box, tol: float = 0.0) -> np.ndarray:
+    """Global ids of the cells whose centroid lies inside the box [[min...], [max...]]."""
+    lo, hi = (np.asarray(c, float) for c in box)
+    out = []
+    for off, blk in zip(_offsets(mesh), mesh.blocks):
+        c = _centroids(mesh, blk)
+        inside = np.all((c >= lo - tol) & (c <= hi + tol), axis=1)
+        out.append(off + np.flatnonzero(inside))
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
+def _face_rows(mesh: Mesh, cell_ids: np.ndarray):
+    """Every face of the given cells: (sorted corner keys padded with -1 (m, 4), owner cell)."""
+    block, row = _locate(mesh, cell_ids)
+    keys, owner = [], []
+    for b in np.unique(block):
+        blk, el = mesh.blocks[b], _types.get(mesh.blocks[b].type)
+        rows, ids = row[block == b], cell_ids[block == b]
+        for face in el.faces:
+            k = np.full((rows.size, 4), -1, dtype=np.int64)
+            k[:, :len(face.corners)] = np.sort(blk.cells[rows][:, list(face.corners)], axis=1)
+            keys.append(k)
+            owner.append(ids)
+    if not keys:
+        return np.zeros((0, 4), np.int64), np.zeros(0, np.int64)
+    return np.vstack(keys), np.concatenate(owner)
+
+
+def _shared_faces(keys: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """(m, 2) owner pairs of the face keys that occur twice (each pair sorted, pairs sorted)."""
+    order = np.lexsort(keys.T[::-1])
+    k, o = keys[order], owner[order]
+    same = np.all(k[1:] == k[:-1], axis=1)
+    i = np.flatnonzero(same)
+    pairs = np.sort(np.stack([o[i], o[i + 1]], axis=1), axis=1)
+    return pairs[np.lexsort(pairs.T[::-1])] if len(pairs) else pairs.reshape(0, 2)
+
+
+def plane_pairs(mesh: Mesh, point, normal, box=None, tol: float = 0.0) -> np.ndarray:
+    """Cell pairs (m, 2) to separate so that the mesh opens along a plane, staircase-wise on its faces.
+
+    Cells are on the plane's positive side when their centroid is (strictly); the pairs are the
+    face neighbours on opposite sides.  With a box, only cells with a node inside it take part and
+    the shared face's centroid must be inside it too (an incision of limited extent).
+    """
+    _solid_mesh(mesh, "cut")
+    p = np.asarray(point, float).reshape(-1)
+    n = np.asarray(normal, float).reshape(-1)
+    if p.size != mesh.dim or n.size != mesh.dim or not np.all(np.isfinite(np.r_[p, n])) or not np.any(n):
+        raise TopologyError(f"cut plane: point and normal need {mesh.dim} finite components, the normal non-zero")
+    n = n / np.linalg.norm(n)
+    if box is not None:
+        lo, hi = (np.asarray(c, float) - s * tol for c, s in zip(box, (1, -1)))
+        near = np.all((mesh.points >= lo) & (mesh.points <= hi), axis=1)
+    ids, side = [], []
+    for off, blk in zip(_offsets(mesh), mesh.blocks):
+        rows = np.arange(len(blk)) if box is None else np.flatnonzero(near[blk.cells].any(axis=1))
+        ids.append(off + rows)
+        side.append((_centroids(mesh, blk)[rows] - p) @ n > 0)
+    ids, side = np.concatenate(ids), np.concatenate(side)
+    keys, owner = _face_rows(mesh, ids)
+    pairs = _shared_faces(keys, owner)
+    where = np.zeros(mesh.n_cells, dtype=np.int8)
+    where[ids] = np.where(side, 1, -1)
+    pairs = pairs[where[pairs[:, 0]] != where[pairs[:, 1]]]
+    if box is not None and len(pairs):
+        centre = np.array([mesh.points[np.intersect1d(a, b)].mean(axis=0)
+                           for a, b in zip(_cell_nodes(mesh, pairs[:, 0]), _cell_nodes(mesh, pairs[:, 1]))])
+        inside = np.all((centre >= lo) & (centre <= hi), axis=1)
+        pairs = pairs[inside]
+    return pairs
+
+
+# --------------------------------------------------------------------------- separating
+
+
+@dataclass
+class Split:
+    """The result of `separate`: new nodes and the cells that now use them (nothing applied yet)."""
+    n_points: int                # points before
+    parents: np.ndarray          # (n_new,) the node each new node copies (new ids n_points + i)
+    cells: np.ndarray            # (m,) global ids of the cells renumbered
+    local: np.ndarray            # (m,) the local node index renumbered in that cell
+    node: np.ndarray             # (m,) the new node id it takes
+    faces: int                   # faces opened
+
+    @property
+    def n_new(self) -> int:
+        return int(self.parents.size)
+
+    @property
+    def changed_cells(self) -> np.ndarray:
+        return np.unique(self.cells)
+
+    @property
+    def touched_nodes(self) -> np.ndarray:
+        """The nodes whose cells changed: the parents and the new nodes."""
+        return np.unique(np.concatenate([self.parents, self.n_points + np.arange(self.n_new)]))
+
+    def apply(self, mesh: Mesh) -> Mesh:
+        """The separated mesh (new arrays where something changed; `mesh` is left as it was)."""
+        points = np.vstack([mesh.points, mesh.points[self.parents]])
+        block, row = _locate(mesh, self.cells)
+        blocks = []
+        for b, blk in enumerate(mesh.blocks):
+            mine = block == b
+            if not mine.any():
+                blocks.append(blk)
+                continue
+            cells = blk.cells.copy()
+            cells[row[mine], self.local[mine]] = self.node[mine]
+            blocks.append(CellBlock(blk.type, cells, blk.tags))
+        return Mesh(points, blocks, self._groups(mesh))
+
+    def _groups(self, mesh: Mesh) -> list:
+        """Mesh groups: their faces (surface groups) follow the cells that own them."""
+        touched = np.zeros(mesh.n_points, dtype=bool)
+        touched[self.parents] = True
+        out = []
+        for g in mesh.groups:
+            faces = {}
+            for name, f in g.cells.items():
+                f = np.asarray(f, dtype=np.int64)
+                hit = touched[f].any(axis=1) if f.ndim == 2 and f.size else np.zeros(len(f), bool)
+                if hit.any():
+                    f = f.copy()
+                    f[hit] = self.map_faces(f[hit], face_owners(mesh, f[hit]))
+                faces[name] = f
+            out.append(replace(g, cells=faces) if faces else g)
+        return out
+
+    def map_faces(self, faces: np.ndarray, owners: np.ndarray) -> np.ndarray:
+        """Boundary faces (n, kf) owned by the given cells, with the owners' new node ids."""
+        faces = np.array(faces, dtype=np.int64, copy=True)
+        if not self.cells.size or not faces.size:
+            return faces
+        n = self.n_points
+        old = self.parents[self.node - n]
+        key = self.cells * n + old                     # (cell, old node) of every renumbering
+        order = np.argsort(key)
+        key, new = key[order], self.node[order]
+        for j in range(faces.shape[1]):
+            want = np.asarray(owners, dtype=np.int64) * n + faces[:, j]
+            at = np.minimum(np.searchsorted(key, want), key.size - 1)
+            hit = key[at] == want
+            faces[hit, j] = new[at[hit]]
+        return faces
+
+
+def _faces_at(el) -> np.ndarray:
+    """(k, f) for each local node, the faces of the element that contain it (-1 padded)."""
+    rows = [[i for i, f in enumerate(el.faces) if a in f.nodes] for a in range(el.n_nodes)]
+    width = max(len(r) for r in rows)
+    out = np.full((el.n_nodes, width), -1, dtype=np.int64)
+    for a, r in enumerate(rows):
+        out[a, :len(r)] = r
+    return out
+
+
+def _pair_faces(mesh: Mesh, pairs: np.ndarray) -> np.ndarray:
+    """Sorted corner keys (m, 4) of the faces the cell pairs share; refused where they share none."""
+    keys, owner = _face_rows(mesh, np.unique(pairs))
+    order = np.lexsort(keys.T[::-1])
+    k, o = keys[order], owner[order]
+    same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
+    shared = {(int(min(o[i], o[i + 1])), int(max(o[i], o[i + 1]))): k[i] for i in same}
+    out, bad = [], []
+    for a, b in pairs:
+        key = shared.get((int(min(a, b)), int(max(a, b))))
+        if key is None:
+            bad.append((int(a), int(b)))
+        else:
+            out.append(key)
+    if bad:
+        shown = ", ".join(f"{a}-{b}" for a, b in bad[:6]) + (" ..." if len(bad) > 6 else "")
+        raise TopologyError(f"cut: {len(bad)} cell pair(s) share no face (already separated, or not "
+                            f"neighbours): {shown}")
+    return np.array(out, dtype=np.int64).reshape(-1, 4)
+
+
+def separate(mesh: Mesh, pairs, inc: Incidence | None = None) -> Split:
+    """Unsew the faces shared by the cell pairs (m, 2): see the module docstring.
+
+    Refused: pairs that share no face; a cut that separates nothing (every node of its faces lies on
+    its front inside the body).  inc: the mesh's incidence when the caller keeps one.
+    """
+    _solid_mesh(mesh, "cut")
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if not len(pairs):
+        raise TopologyError("cut: no face to cut (the cut surface meets no interior face of the mesh)")
+    if pairs.min() < 0 or pairs.max() >= mesh.n_cells:
+        raise TopologyError(f"cut: cell ids must be in 0..{mesh.n_cells - 1}")
+    cut_keys = np.unique(_pair_faces(mesh, pairs), axis=0)
+    inc = incidence(mesh) if inc is None else inc
+    nodes = np.unique(cut_keys[cut_keys >= 0])
+    nodes = _with_midsides(mesh, nodes, pairs)
+    node, cell, local = inc.of(nodes)
+    edges = _joins(mesh, node, cell, local, cut_keys)
+    P = node.size
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(P, P)) if len(edges) \
+        else coo_matrix((P, P))
+    _, comp = connected_components(graph, directed=False)
+    # per node, its components ordered by their lowest cell: the first keeps the node
+    lowest = np.full(comp.max(initial=-1) + 1, np.iinfo(np.int64).max)
+    np.minimum.at(lowest, comp, cell)
+    order = np.lexsort((lowest[comp], node))
+    n_sorted, c_sorted = node[order], comp[order]
+    first_of_node = np.r_[True, n_sorted[1:] != n_sorted[:-1]]
+    new_comp = np.r_[True, (c_sorted[1:] != c_sorted[:-1]) | first_of_node[1:]]
+    # runs of entries of one component; the first run of every node keeps the node
+    starts = np.flatnonzero(new_comp)
+    run = np.cumsum(new_comp) - 1
+    new_runs = run[new_comp & ~first_of_node]
+    new_id = np.full(starts.size, -1, dtype=np.int64)
+    new_id[new_runs] = mesh.n_points + np.arange(new_runs.size)
+    target = np.empty(P, dtype=np.int64)
+    target[order] = new_id[run]
+    moved = np.flatnonzero(target >= 0)
+    if new_runs.size == 0:
+        raise TopologyError(f"cut: the {len(cut_keys)} face(s) separate nothing: every node of them lies on the "
+                            "cut's front inside the body; make the cut reach the surface or cover more faces")
+    parents = n_sorted[starts[new_runs]]
+    return Split(mesh.n_points, parents, cell[moved], local[moved], target[moved], len(cut_keys))
+
+
+def _with_midsides(mesh: Mesh, nodes: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The cut faces' corner nodes plus, for quadratic cells, the midside nodes on those faces."""
+    if not any(_types.get(b.type).quadratic for b in mesh.blocks):
+        return nodes
+    extra = []
+    corners = set(nodes.tolist())
+    for ids in (pairs[:, 0], pairs[:, 1]):
+        block, row = _locate(mesh, ids)
+        for b, r in zip(block, row):
+            blk, el = mesh.blocks[b], _types.get(mesh.blocks[b].type)
+            for face in el.faces:
+                c = blk.cells[r]
+                if all(int(c[i]) in corners for i in face.corners):
+                    extra.extend(int(c[i]) for i in face.nodes[len(face.corners):])
+    return np.unique(np.concatenate([nodes, np.asarray(extra, dtype=np.int64)]))
+
+
+def _joins(mesh, node, cell, local, cut_keys) -> np.ndarray:
+    """Edges (e, 2) between incidence entries (same node) whose cells share an uncut face holding it."""
+    block, row = _locate(mesh, cell)
+    rows_key, rows_entry = [], []
+    for b in np.unique(block):
+        blk, el = mesh.blocks[b], _types.get(mesh.blocks[b].type)
+        at = _faces_at(el)
+        entries = np.flatnonzero(block == b)
+        corners = [list(f.corners) for f in el.faces]
+        for slot in range(at.shape[1]):
+            face = at[local[entries], slot]
+            for fi in np.unique(face[face >= 0]):
+                e = entries[face == fi]
+                k = np.full((e.size, 4), -1, dtype=np.int64)
+                k[:, :len(corners[fi])] = np.sort(blk.cells[row[e]][:, corners[fi]], axis=1)
+                rows_key.append(k)
+                rows_entry.append(e)
+    if not rows_key:
+        return np.zeros((0, 2), np.int64)
+    keys = np.hstack([node[np.concatenate(rows_entry)][:, None], np.vstack(rows_key)])
+    entry = np.concatenate(rows_entry)
+    order = np.lexsort(keys.T[::-1])
+    k, e = keys[order], entry[order]
+    same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
+    # a face shared by two cells joins them at the node unless it is cut
+    if len(same):
+        face_keys = k[same, 1:]
+        is_cut = _rows_in(face_keys, cut_keys)
+        same = same[~is_cut]
+    return np.stack([e[same], e[same + 1]], axis=1)
+
+
+def _rows_in(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """For each row of a, whether it is a row of b (both int64, same width)."""
+    if not len(b) or not len(a):
+        return np.zeros(len(a), dtype=bool)
+    width = a.shape[1]
+    view = np.dtype((np.void, 8 * width))
+    av = np.ascontiguousarray(a).view(view).ravel()
+    bv = np.ascontiguousarray(b).view(view).ravel()
+    return np.isin(av, bv)
+
+
+# --------------------------------------------------------------------------- removal
+
+
+@dataclass
+class Removal:
+    """Cells taken out of a mesh: `new_ids[c]` is cell c's id afterwards (-1: removed)."""
+    removed: np.ndarray          # sorted global ids of the removed cells
+    new_ids: np.ndarray          # (n_cells before,) int64
+    orphans: np.ndarray          # nodes no remaining cell uses (that some removed cell used)
+    touched: np.ndarray          # every node of the removed cells
+
+    def apply(self, mesh: Mesh) -> Mesh:
+        off = _offsets(mesh)
+        blocks = []
+        for b, blk in enumerate(mesh.blocks):
+            keep = self.new_ids[off[b]:off[b + 1]] >= 0
+            if keep.all():
+                blocks.append(blk)
+            elif keep.any():
+                blocks.append(CellBlock(blk.type, blk.cells[keep], None if blk.tags is None else blk.tags[keep]))
+        return Mesh(mesh.points, blocks, self._groups(mesh))
+
+    def _groups(self, mesh: Mesh) -> list:
+        """Mesh groups: cell ids renumbered (removed ones dropped), faces of removed cells dropped."""
+        near = np.zeros(mesh.n_points, dtype=bool)
+        near[self.touched] = True
+        out = []
+        for g in mesh.groups:
+            ids = self.new_ids[g.cell_ids] if g.cell_ids.size else g.cell_ids
+            faces = {}
+            for name, f in g.cells.items():
+                f = np.asarray(f, dtype=np.int64)
+                if f.ndim == 2 and f.size:
+                    hit = np.flatnonzero(near[f].any(axis=1))
+                    owners = face_owners(mesh, f[hit])
+                    keep = np.ones(len(f), bool)
+                    keep[hit[(owners >= 0) & (self.new_ids[np.maximum(owners, 0)] < 0)]] = False
+                    f = f[keep]
+                faces[name] = f
+            out.append(replace(g, cell_ids=ids[ids >= 0], cells=faces))
+        return out
+
+
+def removal(mesh: Mesh, cell_ids, inc: Incidence | None = None) -> Removal:
+    """Remove the given cells; refused when nothing is selected or nothing would remain."""
+    _solid_mesh(mesh, "remove")
+    ids = np.unique(np.asarray(cell_ids, dtype=np.int64))
+    if ids.size == 0:
+        raise TopologyError("remove: no cell selected")
+    if ids.min() < 0 or ids.max() >= mesh.n_cells:
+        raise TopologyError(f"remove: cell ids must be in 0..{mesh.n_cells - 1}")
+    if ids.size == mesh.n_cells:
+        raise TopologyError("remove: every cell of the mesh would be removed")
+    keep = np.ones(mesh.n_cells, dtype=bool)
+    keep[ids] = False
+    new_ids = np.where(keep, np.cumsum(keep) - 1, -1)
+    inc = incidence(mesh) if inc is None else inc
+    nodes = np.unique(np.concatenate(_cell_nodes(mesh, ids)))
+    node, cell, _ = inc.of(nodes)
+    alive = np.zeros(mesh.n_points, dtype=bool)
+    alive[node[keep[cell]]] = True
+    return Removal(ids, new_ids, nodes[~alive[nodes]], nodes)
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def check_topology(mesh: Mesh) -> None:
+    """Conformity after a topology change: node ids in range, no repeated node in a cell, every face
+    shared by at most two cells (from opposite sides, same nodes).  The lips of a cut are coincident
+    boundary faces with different nodes, which `check_mesh` would take for unmerged duplicates."""
+    from .mesh import _check_shared_faces, _check_structure, _face_table, _solid_blocks
+    _check_structure(mesh)
+    if _solid_blocks(mesh):
+        _check_shared_faces(mesh, _face_table(mesh))

@@ -1,0 +1,185 @@
+"""`tensormass batch` (apps/batch.py): variations, the sequential path without dask, the same table on a
+2-worker dask cluster, failures reported without stopping the study, the reports' --workers, and
+two processes compiling one C kernel into an empty cache.
+
+Tables are compared without their timing columns (batch.TIMING_COLUMNS; the reports' time_* and
+peak_memory_mb, stability's wall_time): everything else must be identical, byte for byte."""
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from tensormass.apps import batch
+from tensormass.apps.cli import main
+from tensormass.runtime.errors import SceneError, TensormassError
+
+SCENE = """
+name = "tiny"
+[mesh]
+generate = "bar"
+size = [1.2, 0.2, 0.2]
+cells = [2, 1, 1]
+element = "hexahedron"
+[[material]]
+law = "hooke"
+quadrature = "gauss2"
+E = 1.0e8
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[solver]
+kind = "static"
+steps = 1
+[[probe]]
+name = "tip"
+point = [1.2, 0.1, 0.1]
+[output]
+dir = "must_not_be_written"
+"""
+
+
+@pytest.fixture
+def scene(tmp_path):
+    path = tmp_path / "tiny.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def _table(path, skip=batch.TIMING_COLUMNS):
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in r.items() if k not in skip} for r in csv.DictReader(fh)]
+
+
+# -- --vary ---------------------------------------------------------------------------------------
+
+def test_vary_splits_outside_brackets_and_reads_toml_values():
+    assert batch.split_values("[4,1,1],[8,2,2]") == ["[4,1,1]", "[8,2,2]"]
+    assert batch.split_values('"a,b",c') == ['"a,b"', "c"]
+    vary = batch.parse_vary(["mesh.cells=[4,1,1],[8,2,2]", "material.0.E=1e6,2e6", "material.0.law=hooke,stvk",
+                             "solver.kind=\"static\""])
+    assert vary == [("mesh.cells", [[4, 1, 1], [8, 2, 2]]), ("material.0.E", [1e6, 2e6]),
+                    ("material.0.law", ["hooke", "stvk"]), ("solver.kind", ["static"])]
+    tasks = batch.plan_tasks(["a.toml", "b.toml"], vary)
+    assert len(tasks) == 2 * 2 * 2 * 2 and tasks[1]["values"]["material.0.law"] == "stvk"
+    assert [t["task"] for t in tasks] == list(range(16))
+
+
+@pytest.mark.parametrize("item, words", [("material.0.E", "KEY=V1"), ("=1,2", "KEY=V1"),
+                                          ("mesh.cells=[4,1", "unclosed"), ("a..b=1", "empty part")])
+def test_vary_syntax_errors_name_the_item(item, words):
+    with pytest.raises(TensormassError, match=words):
+        batch.parse_vary([item])
+
+
+def test_vary_bad_keys_give_a_scene_error_naming_the_key(scene):
+    with pytest.raises(SceneError, match=r"solver\.dtt: unknown key"):
+        batch.load_scene(scene, {"solver.dtt": 0.1})
+    with pytest.raises(SceneError, match=r"--vary material\.3\.E: material has 1 entry"):
+        batch.load_scene(scene, {"material.3.E": 1.0})
+    with pytest.raises(SceneError, match=r"--vary mesh\.cells\.x"):
+        batch.load_scene(scene, {"mesh.cells.x": 1})
+    assert batch.load_scene(scene, {"material.0.E": 2e8}, load_mesh=False).materials[0].E == 2e8
+
+
+# -- the sequential path (no dask needed) -----------------------------------------------------------
+
+def test_sequential_batch_reports_failures_and_finishes_the_others(scene, tmp_path, capsys):
+    broken = tmp_path / "broken.toml"
+    broken.write_text(SCENE.replace("nu = 0.3", "nu = 0.7"))
+    out = tmp_path / "t.csv"
+    code = main(["batch", str(scene), str(broken), "--vary", "material.0.E=1e8,-1", "--workers", "1",
+                 "--out", str(out), "--quiet"])
+    assert code == 2
+    rows = _table(out)
+    assert [r["task"] for r in rows] == ["0", "1", "2", "3"]
+    assert [r["status"] for r in rows] == ["ok", "refused", "refused", "refused"]
+    assert rows[0]["exit_code"] == "0" and float(rows[0]["probe.tip.2"]) < 0
+    assert "material[0]" in rows[1]["error"] and "nu" in rows[2]["error"]
+    err = capsys.readouterr().err
+    assert "3 task(s) failed" in err and "[1]" in err and "material.0.E=-1" in err
+    assert not (tmp_path / "must_not_be_written").exists()
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_workers_above_one_without_dask_name_the_extra(scene, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(batch, "dask_available", lambda: False)
+    assert main(["batch", str(scene), "--workers", "2", "--out", str(tmp_path / "t.csv")]) == 2
+    assert 'pip install "tensormass[distributed]"' in capsys.readouterr().err
+    assert not (tmp_path / "t.csv").exists()
+
+
+# -- dask.distributed ------------------------------------------------------------------------------
+
+def test_two_workers_give_the_sequential_table(scene, tmp_path):
+    pytest.importorskip("distributed")
+    vary = ["material.0.E=1e7,1e8", "mesh.cells=[2,1,1],[4,1,1]", "material.0.law=hooke,stvk"]   # 8 tasks
+    seq, par = tmp_path / "seq.csv", tmp_path / "par.csv"
+    rows, code = batch.run_batch([scene], vary, workers=1, out=seq, progress=False)
+    assert code == 0 and len(rows) == 8
+    _, code = batch.run_batch([scene], vary, workers=2, out=par, progress=False)
+    assert code == 0
+    assert _table(seq) == _table(par)
+    assert len({r["probe.tip.2"] for r in _table(par)}) == 8
+
+
+def test_workers_run_one_thread_each():
+    distributed = pytest.importorskip("distributed")
+    before = {k: os.environ.get(k) for k in batch.THREAD_ENV}
+    with batch.worker_environment():
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, env=dict(batch.THREAD_ENV))
+    with cluster, distributed.Client(cluster) as client:
+        info = client.submit(batch.worker_info, pure=False).result()
+    assert info["env"] == batch.THREAD_ENV
+    assert info["numba_threads"] == 1 and info["blas_threads"] in ([1], [])
+    assert {k: os.environ.get(k) for k in batch.THREAD_ENV} == before       # this process's own, restored
+
+
+def test_report_accuracy_same_csv_on_one_and_two_workers(tmp_path):
+    pytest.importorskip("distributed")
+    from tensormass.apps.reports.accuracy import run_accuracy
+    tiny = {"elements": ["hexahedron", "tetra"], "laws": ["hooke"], "quadratures": {"tetra": ["gauss1"]},
+            "levels": [[2, 1, 1], [4, 1, 1]], "levels_quadratic": [[2, 1, 1]], "reference": [4, 1, 1]}
+    timing = ("time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb")
+    for workers in (1, 2):
+        run_accuracy(tmp_path / str(workers), quick=True, _sweep=tiny, benchmarks=["cantilever"],
+                     progress=None, workers=workers)
+    one, two = _table(tmp_path / "1" / "results.csv", timing), _table(tmp_path / "2" / "results.csv", timing)
+    assert len(one) == 4 and one == two
+
+
+# -- the kernel cache under concurrent workers -------------------------------------------------------
+
+COMPILE = textwrap.dedent("""
+    import sys
+    from tensormass.apps.batch import kernel_locks
+    from tensormass.backends.c import loader
+    from tensormass.runtime.kernels import load_kernel
+    with kernel_locks([("tetra", "hooke", "gauss1", "c")]):
+        kernel = load_kernel("tetra", "hooke", "gauss1", backend="c")
+    print(len(loader.COMPILATIONS))
+""")
+
+
+def test_two_processes_compile_one_c_kernel_once(tmp_path):
+    from tensormass.backends.c import loader
+    try:
+        loader.compiler()
+    except Exception:                                        # noqa: BLE001
+        pytest.skip("no C compiler")
+    env = {**os.environ, "TENSORMASS_CACHE": str(tmp_path / "cache")}
+    procs = [subprocess.Popen([sys.executable, "-c", COMPILE], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    assert sorted(int(o[0].split()[-1]) for o in outs) == [0, 1]          # compiled once, loaded once
+    libs = list((tmp_path / "cache").rglob("*.so"))
+    assert len(libs) == 1 and not list((tmp_path / "cache").rglob("*.tmp"))

@@ -1,0 +1,363 @@
+"""Topology changes (runtime.topology, runtime.cutting, [[cut]] / [[remove]] scene events)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+import tensormass as tm
+from tensormass.runtime import cutting, topology as T
+from tensormass.runtime.assembly import Assembler
+from tensormass.runtime.mesh import generate_bar
+from tensormass.runtime.model import Model
+
+
+def _pieces(mesh) -> int:
+    """Connected pieces of a mesh (cells joined by shared nodes)."""
+    rows, cols = [], []
+    start = 0
+    for b in mesh.blocks:
+        n, k = b.cells.shape
+        rows.append(np.repeat(start + np.arange(n), k))
+        cols.append(b.cells.ravel())
+        start += n
+    A = sp.csr_matrix((np.ones(sum(r.size for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(start, mesh.n_points))
+    return connected_components(A @ A.T, directed=False)[0]
+
+
+@pytest.mark.parametrize("element, on_plane", [("tetra", 25), ("hexahedron", 9), ("tetra10", 25), ("wedge", 9),
+                                              ("pyramid", 9)])
+def test_a_plane_through_the_bar_separates_it_in_two(element, on_plane):
+    cells = (12, 4, 4) if element == "tetra" else (12, 2, 2)
+    mesh = generate_bar((1.2, 0.2, 0.2), cells, element)
+    pairs = T.plane_pairs(mesh, [0.3, 0, 0], [1, 0, 0])
+    split = T.separate(mesh, pairs)
+    after = split.apply(mesh)
+    T.check_topology(after)
+    assert _pieces(mesh) == 1 and _pieces(after) == 2
+    assert split.n_new == on_plane                       # every node of the section, once
+    assert np.allclose(mesh.points[split.parents][:, 0], 0.3)
+    assert np.array_equal(after.points[:mesh.n_points], mesh.points)
+    assert np.array_equal(after.points[mesh.n_points:], mesh.points[split.parents])
+    # the cells on the far side took the copies, the others kept their nodes
+    far = T.box_cells(mesh, [[0.3, -1, -1], [2, 1, 1]])
+    assert set(split.changed_cells) <= set(far.tolist())
+    assert mesh.blocks[0].cells is not after.blocks[0].cells      # the old mesh is left as it was
+
+
+def test_an_incision_opens_inside_its_front_only():
+    mesh = generate_bar((1.2, 0.2, 0.2), (12, 4, 4), "tetra")
+    pairs = T.plane_pairs(mesh, [0.6, 0, 0], [1, 0, 0], box=[[0.5, -1, 0.1], [0.7, 1, 1]])
+    split = T.separate(mesh, pairs)
+    after = split.apply(mesh)
+    T.check_topology(after)
+    assert _pieces(after) == 1                                     # still one body
+    # the front (z = 0.1) keeps its nodes; the lips above it are doubled
+    z = mesh.points[split.parents][:, 2]
+    assert np.all(z > 0.1 + 1e-9) and split.n_new == 5 * 2       # two rows of 5 nodes above the front
+
+
+def test_cuts_that_cannot_be_made_are_refused():
+    mesh = generate_bar((1.2, 0.2, 0.2), (6, 2, 2), "tetra")
+    interior = T.plane_pairs(mesh, [0.6, 0, 0], [1, 0, 0], box=[[0.55, 0.05, 0.05], [0.65, 0.15, 0.15]])
+    assert len(interior)
+    with pytest.raises(T.TopologyError, match="separate nothing"):
+        T.separate(mesh, interior[:1])
+    with pytest.raises(T.TopologyError, match="share no face"):
+        T.separate(mesh, [[0, mesh.n_cells - 1]])
+    with pytest.raises(T.TopologyError, match="no face to cut"):
+        T.separate(mesh, np.zeros((0, 2), int))
+    assert not len(T.plane_pairs(mesh, [5.0, 0, 0], [1, 0, 0]))
+    with pytest.raises(T.TopologyError, match="every cell"):
+        T.removal(mesh, np.arange(mesh.n_cells))
+
+
+def _model(text):
+    return Model.from_scene(tm.Scene.from_string(text))
+
+
+SCENE = """
+name = "cut"
+[mesh]
+generate = "bar"
+size = [1.2, 0.2, 0.2]
+cells = [12, 2, 2]
+element = "{element}"
+[[material]]
+region = "all"
+law = "stvk"
+quadrature = "{quad}"
+E = 1.0e6
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0.0, -3.0, -9.81]
+[[loads.traction]]
+box = [[1.2, -1, -1], [1.3, 1, 1]]
+value = [0, 0, -100.0]
+[solver]
+kind = "implicit_euler"
+dt = 0.01
+steps = 3
+[[probe]]
+name = "tip"
+point = [1.15, 0.1, 0.1]
+"""
+
+
+@pytest.mark.parametrize("element, quad", [("tetra", "gauss1"), ("hexahedron", "gauss2"), ("tetra10", "gauss2")])
+@pytest.mark.parametrize("plane", [([0.3, 0, 0], [1, 0, 0]), ([0, 0.1, 0], [0, 1, 0]), ([1.2, 0, 0], [1, 0.3, 0.2])])
+def test_the_local_update_matches_a_model_built_from_scratch(element, quad, plane):
+    """Masses, loads (gravity and the tip traction), constraints, connectivity and probes of the locally
+    updated model equal those of a model built on the cut mesh (the third plane crosses the loaded face)."""
+    text = SCENE.format(element=element, quad=quad)
+    model = _model(text)
+    split = T.separate(model.mesh, T.plane_pairs(model.mesh, *plane))
+    new = cutting.separated(model, split)
+    scene = tm.Scene.from_string(text)
+    ref = Model(new.mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver, scene.output,
+                check=False)
+    assert np.allclose(new.mass, ref.mass, rtol=1e-14, atol=0)
+    assert np.allclose(new.f_ext, ref.f_ext, rtol=0, atol=1e-13 * np.abs(ref.f_ext).max())
+    assert np.array_equal(new.fixed_dofs, ref.fixed_dofs) and np.array_equal(new.prescribed, ref.prescribed)
+    assert np.array_equal(new.free_dofs, ref.free_dofs)
+    for a, b in zip(new.parts, ref.parts):
+        assert np.array_equal(a.cells, b.cells) and np.array_equal(a.dofs, b.dofs)
+        assert np.array_equal(a.D, b.D)                  # constants kept, not recomputed
+    assert np.array_equal(new.probes["tip"].nodes, ref.probes["tip"].nodes)
+    u = np.random.default_rng(0).normal(scale=1e-3, size=new.n_dofs)
+    assert np.allclose(Assembler(new).forces(u), Assembler(ref).forces(u), rtol=1e-12, atol=1e-9)
+
+
+def test_removal_matches_a_model_built_from_scratch():
+    text = SCENE.format(element="tetra", quad="gauss1")
+    model = _model(text)
+    gone = T.removal(model.mesh, T.box_cells(model.mesh, [[0.5, -1, -1], [0.7, 1, 0.1]]))
+    new = cutting.removed(model, gone)
+    scene = tm.Scene.from_string(text)
+    ref = Model(new.mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver, scene.output,
+                check=False)
+    assert new.mesh.n_cells == model.mesh.n_cells - gone.removed.size
+    assert np.allclose(new.mass, ref.mass, rtol=1e-14, atol=0)
+    assert np.allclose(new.f_ext, ref.f_ext, rtol=0, atol=1e-13)
+    assert np.array_equal(new.fixed_dofs, ref.fixed_dofs)
+    for a, b in zip(new.parts, ref.parts):
+        assert np.array_equal(a.cells, b.cells) and np.array_equal(a.D, b.D) and np.array_equal(a.cell_ids, b.cell_ids)
+    lost = sum(p.cell_masses[np.isin(p.cell_ids, gone.removed)].sum() for p in model.parts)
+    assert new.mass.sum() == pytest.approx(model.mass.sum() - 3 * lost, rel=1e-13)
+
+
+def test_mass_and_momentum_are_conserved_through_a_cut():
+    model = _model(SCENE.format(element="hexahedron", quad="gauss2"))
+    split = T.separate(model.mesh, T.plane_pairs(model.mesh, [0.6, 0, 0], [1, 0, 0]))
+    new = cutting.separated(model, split)
+    v = np.random.default_rng(1).normal(size=(model.n_points, 3))
+    v_new = np.vstack([v, v[split.parents]])
+    m, m_new = model.mass.reshape(-1, 3), new.mass.reshape(-1, 3)
+    assert m_new.sum() == pytest.approx(m.sum(), rel=1e-14)
+    assert np.allclose((m_new * v_new).sum(axis=0), (m * v).sum(axis=0), rtol=1e-13, atol=1e-12)
+
+
+def test_no_stale_data_is_reached_after_a_cut():
+    """Poison every array of the old model the new one does not share: the new model's forces do not move."""
+    model = _model(SCENE.format(element="tetra", quad="gauss1"))
+    split = T.separate(model.mesh, T.plane_pairs(model.mesh, [0.3, 0, 0], [1, 0, 0]))
+    new = cutting.separated(model, split)
+    asm = Assembler(new)
+    u = np.random.default_rng(2).normal(scale=1e-3, size=new.n_dofs)
+    before = asm.forces(u).copy(), new.f_ext.copy(), new.mass.copy()
+    kept = [a for p in new.parts for a in (p.cells, p.dofs, p.D)] + [new.mesh.points, new.mass, new.f_ext]
+    old = [a for p in model.parts for a in (p.cells, p.dofs)] + [model.mesh.points, model.mass, model.f_ext,
+                                                                    model.fixed_dofs, model.prescribed]
+    for a in old:
+        if not any(np.shares_memory(a, b) for b in kept):
+            a[...] = -1 if a.dtype.kind == "i" else np.nan
+    assert np.array_equal(asm.forces(u), before[0])
+    assert np.array_equal(new.f_ext, before[1]) and np.array_equal(new.mass, before[2])
+
+
+def _run(text, **kw):
+    return tm.Simulation(tm.Scene.from_string(text), output=False, **kw)
+
+
+FALL = """
+name = "fall"
+[mesh]
+generate = "bar"
+size = [1.2, 0.2, 0.2]
+cells = [12, 2, 2]
+element = "hexahedron"
+[[material]]
+region = "all"
+law = "stvk"
+quadrature = "gauss2"
+E = 1.0e8
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[solver]
+kind = "implicit_euler"
+dt = 0.004
+steps = 250
+rayleigh = [0.0, 0.001]
+[[cut]]
+step = 1
+plane = [[0.1, 0, 0], [1, 0, 0]]
+[[probe]]
+name = "tip"
+point = [1.2, 0.1, 0.1]
+[[probe]]
+name = "stub"
+point = [0.05, 0.1, 0.1]
+"""
+
+
+def test_a_piece_cut_off_falls_freely_while_the_clamped_stub_stays():
+    sim = _run(FALL)
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    (event,) = summary.topology
+    assert event["kind"] == "cut" and event["step"] == 1 and event["nodes_added"] == 9 and event["faces"] == 4
+    t = np.asarray(summary.per_step["time"])
+    tip = np.asarray(summary.per_step["probes"]["tip"])[:, 2]
+    # from the cut on (after step 1) the piece is free: u_z(t) - u_z(t1) - v(t1)(t - t1) = -g (t - t1)^2 / 2
+    # to implicit Euler's O(h / t) (about 0.4 % at the end)
+    t1, z1 = t[0], tip[0]
+    v1 = (tip[1] - tip[0]) / (t[1] - t[0]) + 9.81 * (t[1] - t[0]) / 2
+    drop = tip[-1] - z1 - v1 * (t[-1] - t1)
+    assert drop == pytest.approx(-9.81 * (t[-1] - t1) ** 2 / 2, rel=0.01)
+    stub = np.asarray(summary.per_step["probes"]["stub"])
+    assert np.abs(stub).max() < 1e-5                    # the clamped stub barely moves
+
+
+SLAB = """
+name = "incision"
+[mesh]
+generate = "bar"
+size = [1.0, 0.5, 0.1]
+cells = [10, 6, 1]
+element = "tetra"
+[[material]]
+region = "all"
+law = "stable_neohookean"
+quadrature = "gauss1"
+E = 1.0e4
+nu = 0.3
+density = 1000.0
+[[fixed]]
+box = [[-1, -1, -1], [1e-9, 2, 2]]
+[[fixed]]
+box = [[1.0, -1, -1], [2, 2, 2]]
+displacement = [0.2, 0.0, 0.0]
+[solver]
+kind = "static"
+steps = 4
+[[cut]]
+step = 2
+plane = [[0.5, 0, 0], [1, 0, 0]]
+box = [[0.45, 0.2, -1], [0.55, 0.6, 1]]
+"""
+
+
+def test_an_incision_in_a_stretched_slab_opens():
+    sim = _run(SLAB)
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    (event,) = summary.topology
+    model, u = sim.model, sim.displacement
+    T.check_topology(model.mesh)
+    n0 = model.n_points - event["nodes_added"]
+    new = np.arange(n0, model.n_points)
+    parent = np.array([int(np.flatnonzero(np.all(model.mesh.points[:n0] == model.mesh.points[i], axis=1))[0])
+                       for i in new])
+    gap = u[new, 0] - u[parent, 0]
+    assert gap.max() > 0.05                               # the lips separate along the pull
+    assert np.all(gap > -1e-12)                           # and nowhere overlap
+    assert summary.health["min_det_F"] > 0                # no inverted element
+
+
+def test_removal_takes_out_mass_and_the_run_goes_on():
+    text = FALL.replace("""[[cut]]
+step = 1
+plane = [[0.1, 0, 0], [1, 0, 0]]""", """[[remove]]
+time = 0.02
+box = [[0.5, -1, -1], [0.7, 1, 1]]""").replace("steps = 250", "steps = 20")
+    sim = _run(text)
+    mass0 = sim.model.mass.sum()
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    (event,) = summary.topology
+    assert event["cells_removed"] == 2 * 2 * 2 and event["nodes_orphaned"] == 3 * 3
+    assert sim.model.mass.sum() == pytest.approx(mass0 * 10 / 12, rel=1e-12)
+    assert summary.n_elements == 12 * 2 * 2 - 8
+
+
+def test_scene_errors_name_the_event():
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].*no interior face"):
+        _run(FALL.replace("[[0.1, 0, 0], [1, 0, 0]]", "[[5.0, 0, 0], [1, 0, 0]]"))
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].time.*after the run's end"):
+        tm.Scene.from_string(FALL.replace("step = 1\nplane", "time = 9.0\nplane"))
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].*time = \.\.\. .* or step"):
+        tm.Scene.from_string(FALL.replace("step = 1\nplane", "plane"))
+    with pytest.raises(tm.TensormassError, match=r"remove\[0\].*no cell"):
+        _run(FALL.replace("[[cut]]\nstep = 1\nplane = [[0.1, 0, 0], [1, 0, 0]]",
+                          "[[remove]]\nstep = 1\nbox = [[5, 5, 5], [6, 6, 6]]"))
+    with pytest.raises(tm.TensormassError, match=r"static run.*step"):
+        tm.Scene.from_string(SLAB.replace("step = 2\nplane", "time = 0.5\nplane"))
+
+
+def test_frames_after_a_cut_have_the_new_points(tmp_path):
+    text = FALL.replace("steps = 250", "steps = 3") + f'\n[output]\ndir = "{tmp_path.as_posix()}/out"\n'
+    tm.Simulation(tm.Scene.from_string(text)).run()
+    import meshio
+    counts = [meshio.read(tmp_path / "out" / f"frame_{k:06d}.vtu").points.shape[0] for k in range(4)]
+    assert counts == [13 * 3 * 3] + [13 * 3 * 3 + 9] * 3
+
+
+def test_a_notched_slab_pulled_apart_tears_through():
+    """The tearing example: the notch's front opens first, the tear runs across, the halves separate."""
+    from tensormass.runtime.topology_events import pieces
+    from pathlib import Path
+    path = Path(__file__).parents[2] / "examples" / "cutting" / "slab_tearing.toml"
+    sim = tm.Simulation(tm.Scene.from_toml(path), output=False)
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    notch, *tears = summary.topology
+    assert notch["name"] == "notch" and tears and all(t["criterion"] == "stretch" for t in tears)
+    assert sum(t["faces"] for t in tears) > 3 * notch["faces"]
+    count, piece = pieces(sim.model.mesh)
+    big = np.sort(np.bincount(piece))[::-1]
+    assert count >= 2 and big[1] > 0.3 * big[0]          # two halves, not a few fragments
+    T.check_topology(sim.model.mesh)
+    # below its threshold the same pull tears nothing
+    calm = tm.Scene.from_string(path.read_text().replace("threshold = 0.35", "threshold = 5.0")
+                                .replace('dir = "out/slab_tearing"', 'dir = "out"'))
+    summary = tm.Simulation(calm, output=False).run()
+    assert [e["name"] for e in summary.topology] == ["notch"]
+
+
+def test_a_static_run_refuses_a_piece_nothing_holds():
+    text = SLAB.replace("""[[cut]]
+step = 2
+plane = [[0.5, 0, 0], [1, 0, 0]]
+box = [[0.45, 0.2, -1], [0.55, 0.6, 1]]""", """[[cut]]
+step = 2
+plane = [[0.5, 0, 0], [1, 0, 0]]
+[[cut]]
+step = 3
+plane = [[0.7, 0, 0], [1, 0, 0]]""")
+    with pytest.raises(tm.RunStopped, match=r"cut\[1\] after step 3 leaves a piece of .* nothing holds"):
+        _run(text).run()
+
+
+def test_tearing_rules_are_checked():
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].threshold: missing"):
+        tm.Scene.from_string(SLAB.replace("step = 2\nplane = [[0.5, 0, 0], [1, 0, 0]]\nbox = [[0.45, 0.2, -1], [0.55, 0.6, 1]]",
+                                          'criterion = "stretch"'))
+    with pytest.raises(tm.TensormassError, match=r"cut\[0\].step: a tearing rule"):
+        tm.Scene.from_string(SLAB.replace("step = 2\nplane", 'criterion = "stretch"\nthreshold = 0.3\nstep = 2\nplane'))
