@@ -113,6 +113,7 @@ class MeshSpec:
     origin: tuple = (0.0, 0.0, 0.0)      # (shell: "shell" with generate = "plate" / "sphere", or a file's triangles)
     radius: float = 0.5                  # generate = "sphere": radius of the icosphere ...
     subdivisions: int = 3                # ... and its subdivisions (20 x 4^s triangles)
+    divisions: int = 6                   # generate = "ball": tetrahedra, n cells along the central cube's edge
 
 
 @dataclass
@@ -376,7 +377,7 @@ _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "
 _CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every", "sweep", "duration")
 TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
-_MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions")
+_MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
@@ -403,7 +404,8 @@ _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days
 LINEAR_SOLVERS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 INVERSION_ACTIONS = ("warn", "stop")
 MASS_KINDS = ("lumped", "consistent")       # runtime/mass.py
-GENERATORS = ("bar", "plate", "sphere")       # plate, sphere: shell surfaces (runtime.surfaces)
+GENERATORS = ("bar", "plate", "sphere", "ball")   # plate, sphere: shell surfaces (runtime.surfaces);
+                                                  # ball: a tetrahedral solid ball (runtime.solids)
 ELEMENTS_3D = BAR_ELEMENTS[3]           # what generate_bar builds (runtime.mesh)
 ELEMENTS_2D = BAR_ELEMENTS[2]
 CELL_TYPES = _element_types.names()     # every registered element type (tensormass.elements)
@@ -584,7 +586,7 @@ class _Parser:
         if ("generate" in t) == ("file" in t):
             raise SceneError("mesh: give exactly one of generate = \"bar\" or file = \"...\"")
         if "file" in t:
-            extra = [k for k in ("size", "cells", "origin", "radius", "subdivisions") if k in t]
+            extra = [k for k in ("size", "cells", "origin", "radius", "subdivisions", "divisions") if k in t]
             if extra:
                 raise SceneError(f"mesh.{extra[0]}: only used with generate = \"bar\", not with mesh.file")
             element = None
@@ -598,6 +600,10 @@ class _Parser:
             self.shell = element == "shell"
             return MeshSpec(generate=None, file=str(path), **({"element": element} if element else {}))
         generator = self.string(t["generate"], "mesh.generate", GENERATORS)
+        if generator == "ball":
+            return self._ball(t)
+        if "divisions" in t:
+            raise SceneError("mesh.divisions: only used with generate = \"ball\"")
         if generator != "bar":
             return self._surface(t, generator)
         for k in ("radius", "subdivisions"):
@@ -633,6 +639,22 @@ class _Parser:
         origin = self.vector(t["origin"], "mesh.origin") if "origin" in t else (0.0,) * self.dim
         _check_bar_extent(size, origin)
         return MeshSpec(generate="bar", file=None, size=size, cells=cells, element=element, origin=origin)
+
+    def _ball(self, t) -> MeshSpec:
+        """generate = "ball" (radius, divisions): the solid ball in tetrahedra, a cubed ball with
+        6 (n^3 + 6 n^2 round(2n/3)) cells for n = divisions (runtime.solids.ball_tetrahedra)."""
+        for k in ("size", "cells", "subdivisions"):
+            if k in t:
+                raise SceneError(f"mesh.{k}: not used with generate = \"ball\" (radius, divisions)")
+        element = self.string(t.get("element", "tetra"), "mesh.element", ("tetra",))
+        self.dim = 3
+        origin = self.vector(t["origin"], "mesh.origin", dim=3) if "origin" in t else (0.0, 0.0, 0.0)
+        radius = self.number(t.get("radius", 0.5), "mesh.radius", positive=True)
+        divisions = self.integer(t.get("divisions", 6), "mesh.divisions", 1)
+        if divisions > 40:
+            raise SceneError(f"mesh.divisions: at most 40 (2.5 million tetrahedra), got {divisions}")
+        return MeshSpec(generate="ball", file=None, size=(), cells=(), element=element, origin=origin,
+                        radius=radius, divisions=divisions)
 
     def _surface(self, t, generator) -> MeshSpec:
         """generate = "plate" (size [a, b], cells [nx, ny], 2 triangles per cell, at z = 0) or

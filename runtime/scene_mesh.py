@@ -48,7 +48,10 @@ def load_mesh(scene):
         spec = scene.mesh
         key = "mesh.file" if spec.file is not None else "mesh"
         try:
-            if spec.file is not None or spec.generate in SURFACES:
+            if spec.generate == "ball":
+                mesh = ball_mesh(spec)
+                _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
+            elif spec.file is not None or spec.generate in SURFACES:
                 mesh = _mesh.read_mesh(spec.file) if spec.element != "shell" else shell_mesh(spec)
                 check_coordinates(mesh.points)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
@@ -94,6 +97,15 @@ def shell_mesh(spec):
     return _mesh.Mesh(points, [_mesh.CellBlock("shell", np.asarray(triangles, dtype=np.int64))])
 
 
+def ball_mesh(spec):
+    """The tetrahedral solid ball of a MeshSpec with generate = "ball" (runtime.solids), at its origin."""
+    from .solids import ball_tetrahedra
+    points, tetra = ball_tetrahedra(spec.radius, spec.divisions)
+    points = points + np.asarray(spec.origin, float)[:3]
+    check_coordinates(points)
+    return _mesh.Mesh(points, [_mesh.CellBlock("tetra", tetra)])
+
+
 def _file_triangles(path):
     """(points (n, 3), triangles) of a surface mesh file: its triangle cells, renumbered."""
     import meshio
@@ -125,6 +137,8 @@ def build_mesh(spec):
     """Generate or read the mesh of a MeshSpec and check it."""
     if getattr(spec, "element", None) == "shell":
         mesh = shell_mesh(spec)
+    elif spec.generate == "ball":
+        mesh = ball_mesh(spec)
     elif spec.file:
         mesh = _mesh.read_mesh(spec.file)
     elif spec.generate in (None, "bar"):

@@ -5,10 +5,12 @@ accuracy   sweeps element x law x quadrature x resolution over benchmarks with k
            refinement, cook, block) or a user scene, and writes
            results.csv, error_vs_time.png (Pareto front), convergence.png, report.md
 stability  runs the stiff and extreme cases of the brief and writes a table and report.md
+squeeze    the thesis' ball squeezed between two planes: volume lost by shells, FEM and MSS
 """
 from __future__ import annotations
 
 from .accuracy import add_accuracy_command
+from .squeeze import add_squeeze_command
 from .stability import add_stability_command
 
 
@@ -17,3 +19,4 @@ def add_report_command(subparsers) -> None:
     sub = report.add_subparsers(dest="report_command", required=True)
     add_accuracy_command(sub)
     add_stability_command(sub)
+    add_squeeze_command(sub)
