@@ -347,6 +347,25 @@ class Simulation:
         U[:, :model.dim] += x_new - x
         error = abs(constraint.volume(model.mesh.points + U[:, :model.dim]) / constraint.rest_volume - 1.0)
         self.volume_error = max(getattr(self, "volume_error", 0.0), error)
+        if model.solver.kind != "static":
+            self._tangent_velocities(model, constraint, free, x_new)
+
+    def _tangent_velocities(self, model, constraint, free, x) -> None:
+        """Make the velocities tangent to the volume constraint too: v <- v - mu M^-1 g, g = dV/dx at the
+        projected positions (free components), mu such that g . v = 0 (RATTLE's velocity step).
+
+        Moving the positions alone leaves velocities that keep pointing across the constraint: the next
+        step moves the nodes in, the projection out again, and the kinetic energy grows without bound
+        (the squeezed ball of `report squeeze`: 220 J at the end against 2.5 J without the constraint).
+        M^-1 weighting keeps the momentum: sum_i m_i M^-1 g_i = sum_i g_i = 0 on a closed surface."""
+        dim = model.dim
+        V = self.ctx.v.reshape(model.n_points, model.dofs_per_node)
+        m = model.mass.reshape(model.n_points, model.dofs_per_node)[:, :dim]
+        w = np.divide(free, m, out=np.zeros_like(free), where=m > 0)
+        g = constraint.vertex_normals(x)
+        denominator = float(np.sum(g * w * g))
+        if denominator > 0:
+            V[:, :dim] -= (float(np.sum(g * V[:, :dim])) / denominator) * w * g
 
     def _hint(self, k: int) -> str:
         """What the integrator can say about a divergence (explicit: dt against the stable step)."""

@@ -12,8 +12,6 @@ no contact: the plates are glued to the caps, as in examples/shells/ball_squeeze
 
     shell + constraint   CST-DKT shells (co-rotational) on an icosphere of 1 280 triangles (the
                          thesis' count), h = 10 cm, solver.preserve_volume = true
-    shell + constraint   the same, plus project_velocities after every step (see there)
-      + velocities
     shell                the same without the constraint
     FEM hooke            tetrahedra, linear elasticity (small strain: the thesis' "linear FEM")
     FEM neohookean       tetrahedra, compressible neo-Hookean (finite strain), the same E and nu
@@ -48,9 +46,10 @@ keeps its volume with the constraint (2e-16) and loses 11.8 % without; MSS loses
 thesis' figure) and ends with 326 inverted tetrahedra (status "invalid": edge springs do not resist
 inversion); linear FEM loses 2.96 % (thesis 1.9 %) while its own measure tr(grad u) sees -0.36 %:
 small strain misses the quadratic terms of det(I + grad u), so its bulk stiffness does not hold
-the volume at 30 %; neo-Hookean with the same E and nu loses 0.40 %.  The runtime's constraint
-moves positions only, and the kinetic energy grows through the run (220 J at the end, 2.5 J
-without the constraint); the row "shell_constraint_v" adds project_velocities and stays at 0.8 J.
+the volume at 30 %; neo-Hookean with the same E and nu loses 0.40 %.  This report found that the runtime's constraint,
+which then moved the positions only, pumped kinetic energy into the run (220 J at the end, 2.5 J
+without the constraint); it now makes the velocities tangent to the constraint too
+(Simulation._tangent_velocities) and the run ends at 0.11 J.
 
 **What differs from the thesis** (whose figures are printed next to ours: FEM 1.9 %, MSS
 12.5 %, CST-DKT 0 %): the radius, the step count, the time scheme's details and the meshes are not
@@ -77,11 +76,9 @@ SQUEEZE = 0.6        # the top plate's travel [m]: 30 % of the diameter
 BAND = 0.1           # equator band: |Z| <= BAND R
 THESIS = {"shell_constraint": 0.0, "fem_hooke": 1.9, "mss": 12.5}     # volume lost [%], section 4.7
 
-# name, family, law, quadrature, preserve_volume, what  (preserve_volume "velocity": the report also
-# projects the velocities, see project_velocities)
+# name, family, law, quadrature, preserve_volume, what
 MODELS = (
     ("shell_constraint", "shell", "cst_dkt", "exact", True, "CST-DKT shells + volume constraint"),
-    ("shell_constraint_v", "shell", "cst_dkt", "exact", "velocity", "CST-DKT + constraint + velocity projection"),
     ("shell", "shell", "cst_dkt", "exact", False, "CST-DKT shells, no constraint"),
     ("fem_hooke", "tetra", "hooke", "gauss1", False, "tetrahedral FEM, linear (Hooke, small strain)"),
     ("fem_neohookean", "tetra", "neohookean", "gauss1", False, "tetrahedral FEM, neo-Hookean (finite strain)"),
@@ -108,31 +105,13 @@ def squeeze_scene(family, law, quadrature, preserve, cfg) -> dict:
     solver = {"kind": "implicit_euler", "dt": dt, "steps": int(round((ramp + hold) / dt)), "backend": "c",
               "newton_max_iterations": 100}
     if preserve:
-        solver["preserve_volume"] = True          # "velocity" too: the report adds project_velocities
+        solver["preserve_volume"] = True
     return {"name": "squeeze", "mesh": mesh, "material": [material],
             "amplitude": [{"name": "squeeze", "time": [0.0, ramp, ramp + hold], "value": [0.0, 1.0, 1.0]}],
             "fixed": [{"name": "bottom", "box": [[-big, -big, -big], [big, big, -CAP * RADIUS]]},
                       {"name": "top", "box": [[-big, -big, CAP * RADIUS], [big, big, big]],
                        "displacement": [0.0, 0.0, -SQUEEZE], "amplitude": "squeeze"}],
             "solver": solver, "output": {"fields": []}}
-
-
-def project_velocities(sim) -> None:
-    """Remove the velocity component that changes the enclosed volume (an on_step callback).
-
-    The runtime's constraint (solver.preserve_volume) moves the positions back onto the rest
-    volume after every step and leaves the velocities as they were; they keep pointing inward,
-    the next step moves the nodes in again and the projection out again, in a pattern the
-    membrane resists: measured here, the kinetic energy grows during the whole squeeze.  This
-    callback makes the velocities tangent to the constraint too, v <- v - mu grad V (free
-    components only, mu such that grad V . v = 0), as position-based dynamics does."""
-    model = sim.model
-    constraint, free = model.volume_constraint
-    U = sim.ctx.u.reshape(model.n_points, model.dofs_per_node)
-    V = sim.ctx.v.reshape(model.n_points, model.dofs_per_node)
-    g = constraint.vertex_normals(model.mesh.points + U[:, :3])
-    mu = float((V[:, :3] * g).sum()) / float(((g * free) ** 2).sum())
-    V[:, :3] -= mu * g * free
 
 
 def _surface(model, family):
@@ -190,8 +169,6 @@ def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
 
     def record(sim):
         nonlocal volume
-        if preserve == "velocity":
-            project_velocities(sim)
         if volume is None:
             volume = _Volume(sim.model, family)
         losses.append(1.0 - volume(sim.displacement) / volume.rest)

@@ -29,9 +29,12 @@ def test_quick_report_writes_its_csv_and_json(quick):
 
 def test_the_constraint_keeps_the_volume_and_the_others_lose_some(quick):
     _, rows = quick
-    for name in ("shell_constraint", "shell_constraint_v"):
-        assert abs(rows[name]["volume_loss_percent"]) < 1e-6          # |1 - V/V0| < 1e-8
-        assert abs(rows[name]["max_volume_loss_percent"]) < 1e-6
+    assert abs(rows["shell_constraint"]["volume_loss_percent"]) < 1e-6          # |1 - V/V0| < 1e-8
+    assert abs(rows["shell_constraint"]["max_volume_loss_percent"]) < 1e-6
+    # the velocities are projected too, so the constraint pumps no kinetic energy in: measured on the
+    # quick case, 4.2 J against 0.63 J without the constraint (a stiffer, bulging ball still ringing
+    # after its short hold); positions-only projection gave 21 J (100 J at dt = 0.02)
+    assert rows["shell_constraint"]["kinetic_end"] < 10 * rows["shell"]["kinetic_end"]
     for name in ("shell", "fem_hooke", "fem_neohookean", "mss"):
         assert rows[name]["volume_loss_percent"] > 0.1, name
     for name, row in rows.items():
