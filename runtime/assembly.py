@@ -258,10 +258,14 @@ def _scatter_block_K_nodes(data, Ke, blocks, dpn, start, m):
                     data[base + j] += Ke[e, r, b * dpn + j]
 
 
-def _node_blocks(pos, dpn):
-    """block_positions(pos, dpn), or None when the dofs are not node-major (full positions then)."""
+def _node_blocks(pos, dpn, blocks=None):
+    """The node-blocked map: the pattern's `blocks` when given (node-major dofs), else
+    block_positions(pos, dpn) (pos: the per-entry map or a callable building it); None when the
+    dofs are not node-major (full positions then)."""
+    if blocks is not None:
+        return blocks
     try:
-        return block_positions(pos, dpn)
+        return block_positions(pos() if callable(pos) else pos, dpn)
     except TensormassError:
         return None
 
@@ -297,11 +301,12 @@ class _Plan:
     """One part's blocks, their colours, per-thread element buffers and its flags/energy arrays."""
 
     def __init__(self, part, pos, dofs_per_node: int, parallel, blocks=None, index_dtype=None):
-        """pos: the per-entry map of the active cells; or None and blocks, their node-blocked map
-        (node-major dofs), with index_dtype the pattern's (the per-entry map's) index type."""
+        """pos: the per-entry map of the active cells, or a callable building it (only needed when
+        there is no node-blocked map); blocks: their node-blocked map from the pattern (node-major
+        dofs) or None; index_dtype: the per-entry map's index type when pos is a callable."""
         k = part.kernel
         self.part, self.pos = part, pos
-        index_bytes = np.dtype(index_dtype).itemsize if pos is None else pos.dtype.itemsize
+        index_bytes = np.dtype(index_dtype).itemsize if callable(pos) else pos.dtype.itemsize
         self.n = part.n_active
         self.cells = np.ascontiguousarray(part.cells_active, dtype=np.int64)
         self.dofs = np.ascontiguousarray(part.dofs_active, dtype=np.int64)
@@ -331,12 +336,9 @@ class _Plan:
         self.flags = np.zeros(self.n, dtype=np.int32)
         self.energy = np.zeros(self.n)
         # one node-blocked map serves the buffered scatter and the fused kernels
-        if not self.n:
-            self.blocks = None
-        elif pos is None:
-            self.blocks = np.ascontiguousarray(blocks)
-        else:
-            self.blocks = _node_blocks(pos, dofs_per_node)
+        self.blocks = _node_blocks(pos, dofs_per_node, blocks) if self.n else None
+        if callable(self.pos):
+            self.pos = self.pos() if self.blocks is None else None
         self.fused = _fused(k) if self.blocks is not None else None
         self._scratch_f = None
         self._buffers = []
@@ -407,11 +409,12 @@ class Assembler:
         pattern = self.pattern
         self.plans = []
         for i, (p, blocks) in enumerate(zip(parts, pattern.blocks)):
-            if blocks is None:              # dofs not node-major: the per-entry map
-                self.plans.append(_Plan(p, self._part_positions(i), dpn, self._parallel_option))
-            else:                           # node-major: the node-blocked map straight from the pattern
-                blocks = blocks if p.index is None else blocks[p.index]
-                self.plans.append(_Plan(p, None, dpn, self._parallel_option, blocks, pattern.index_dtype))
+            # node-major dofs: the node-blocked map straight from the pattern; the per-entry map
+            # is built only for a plan that has none
+            if blocks is not None and p.index is not None:
+                blocks = np.ascontiguousarray(blocks[p.index])
+            self.plans.append(_Plan(p, lambda i=i: self._part_positions(i), dpn, self._parallel_option,
+                                    blocks, pattern.index_dtype))
         self.parallel = [plan.parallel for plan in self.plans]
         self._constant_K = None
 

@@ -202,11 +202,9 @@ class SparsePattern:
         self._rows_cache = None
         self.node_indptr = self.node_cols = None
         if nodes is None:
-            self._positions = self._by_dofs(tables, n_dofs)
-            self._blocks = [None] * len(tables)
+            self._blocks, self._positions = [None] * len(tables), self._by_dofs(tables, n_dofs)
         else:
-            self._blocks = self._by_nodes(nodes, n_dofs // dofs_per_node, dofs_per_node)
-            self._positions = [None] * len(tables)
+            self._blocks, self._positions = self._by_nodes(nodes, n_dofs // dofs_per_node, dofs_per_node)
 
     @classmethod
     def rebuild(cls, node_tables, n_nodes: int, dofs_per_node: int) -> "SparsePattern":
@@ -294,7 +292,7 @@ class SparsePattern:
 
     def _by_nodes(self, node_tables, n_nodes, dpn):
         """Node-major dofs: the pattern and every table's node-blocked map from one numba pass over
-        the node -> cell incidences (O(incidences x k)); returns the maps."""
+        the node -> cell incidences (O(incidences x k)); returns (blocks, positions: not built yet)."""
         tables = [np.ascontiguousarray(c, dtype=np.int64) for c in node_tables]
         sizes = [c.shape[1] for c in tables]
         flat = np.concatenate([c.ravel() for c in tables]) if tables else np.zeros(0, dtype=np.int64)
@@ -325,7 +323,7 @@ class SparsePattern:
             size = len(c) * dpn * k * k
             out.append(flat_blocks[at:at + size].reshape(len(c), dpn * k, k))
             at += size
-        return out
+        return out, [None] * len(out)
 
     @staticmethod
     def _keys(dofs, n_dofs):
@@ -427,3 +425,19 @@ def _reference_submatrix_map(pattern, rows_keep, cols_keep):
     indptr = np.concatenate([[0], np.cumsum(np.bincount(r[entries], minlength=rows_keep.size))])
     shape = (rows_keep.size, cols_keep.size)
     return entries, c[entries].astype(pattern.indices.dtype), indptr.astype(pattern.indptr.dtype), shape
+
+
+class _ReferencePattern(SparsePattern):
+    """The pattern as it was built before runtime.pattern (node pairs sorted, every per-entry map
+    built at once, the Assembler deriving the node-blocked maps from them, numpy submatrix maps):
+    the tests and apps/bench_pattern.py compare with it."""
+
+    def _by_nodes(self, node_tables, n_nodes, dpn):
+        ref = _reference_by_nodes(node_tables, n_nodes, dpn)
+        self.indices, self.indptr, self.nnz, self.diagonal = ref["indices"], ref["indptr"], ref["nnz"], ref["diagonal"]
+        self._rows = ref["_rows"]
+        self.index_dtype = self.indices.dtype.type
+        return [None] * len(node_tables), ref["positions"]
+
+    def submatrix_map(self, rows_keep, cols_keep):
+        return _reference_submatrix_map(self, rows_keep, cols_keep)
