@@ -368,7 +368,7 @@ def _node_tables(dof_tables, n_dofs, dpn):
         if d.ndim != 2 or d.shape[1] % dpn:
             return None
         nodes = d[:, ::dpn] // dpn
-        if not np.array_equal(d.reshape(len(d), -1, dpn), nodes[:, :, None] * dpn + np.arange(dpn)):
+        if not np.array_equal(d.reshape(len(d), d.shape[1] // dpn, dpn), nodes[:, :, None] * dpn + np.arange(dpn)):
             return None
         out.append(nodes)
     return out
