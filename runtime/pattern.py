@@ -85,6 +85,10 @@ def _node_pattern(flat, estart, bstart, n_nodes, dpn, blocks):
     node_indptr = np.zeros(n_nodes + 1, dtype=np.int64)
     mark = np.full(n_nodes, -1, dtype=np.int64)
     rank = np.zeros(n_nodes, dtype=np.int64)
+    k_max = 0
+    for g in range(estart.size - 1):
+        k_max = max(k_max, estart[g + 1] - estart[g])
+    offset = np.empty(k_max, dtype=np.int64)
     at = 0
     for m in range(n_nodes):
         lo = at
@@ -105,17 +109,20 @@ def _node_pattern(flat, estart, bstart, n_nodes, dpn, blocks):
         for j in range(deg):
             rank[cols[lo + j]] = j
         base = dpn * dpn * lo
+        step = dpn * deg
         for q in range(ptr[m], ptr[m + 1]):
             p = inc[q]
             g = elem_of[p]
             e0 = estart[g]
             k = estart[g + 1] - e0
-            a = p - e0
+            for b in range(k):
+                offset[b] = base + dpn * rank[flat[e0 + b]]
+            o = bstart[g] + (p - e0) * dpn * k
             for i in range(dpn):
-                row = base + i * dpn * deg
-                o = bstart[g] + (a * dpn + i) * k
+                shift = i * step
                 for b in range(k):
-                    blocks[o + b] = row + dpn * rank[flat[e0 + b]]
+                    blocks[o + b] = offset[b] + shift
+                o += k
     return node_indptr, cols[:at].copy()
 
 
@@ -367,11 +374,24 @@ def _node_tables(dof_tables, n_dofs, dpn):
         d = np.asarray(d, dtype=np.int64)
         if d.ndim != 2 or d.shape[1] % dpn:
             return None
-        nodes = d[:, ::dpn] // dpn
-        if not np.array_equal(d.reshape(len(d), d.shape[1] // dpn, dpn), nodes[:, :, None] * dpn + np.arange(dpn)):
+        nodes = np.empty((len(d), d.shape[1] // dpn), dtype=np.int64)
+        if not _nodes_of(np.ascontiguousarray(d), dpn, nodes):
             return None
         out.append(nodes)
     return out
+
+
+@njit(cache=True)
+def _nodes_of(dofs, dpn, nodes):
+    """nodes[e, a] = dofs[e, a dpn] // dpn; False unless dofs[e, a dpn + i] = nodes[e, a] dpn + i."""
+    for e in range(dofs.shape[0]):
+        for a in range(nodes.shape[1]):
+            m = dofs[e, a * dpn] // dpn
+            nodes[e, a] = m
+            for i in range(dpn):
+                if dofs[e, a * dpn + i] != m * dpn + i:
+                    return False
+    return True
 
 
 node_tables = _node_tables
