@@ -9,7 +9,7 @@ from tensormass.runtime.dofs import node_dofs
 from tensormass.runtime.fused import block_positions
 from tensormass.runtime.mesh import generate_bar
 from tensormass.runtime.model import Model
-from tensormass.runtime.pattern import _reference_by_nodes, _reference_submatrix_map
+from tensormass.runtime.pattern import _ReferencePattern, _reference_by_nodes, _reference_submatrix_map
 from tensormass.runtime.scene import Adapt, Fixed, Material, Solver
 
 FIELDS = ("indices", "indptr", "diagonal", "_rows")
@@ -129,11 +129,10 @@ def test_submatrix_map_equals_the_numpy_map():
             _same(a, b, what)
 
 
-def _reference_plans(asm, model):
-    """Per part, the node-blocked map the Assembler used to derive from the full positions."""
+def _full_positions(model):
+    """The pattern by dofs of the Assembler's tables: every per-entry map built at once."""
     tables = [p.dofs for p in model.parts] + [t for c in model.couplings for t in c.patch_tables]
-    old = SparsePattern(tables, model.n_dofs)              # by dofs: the full per-entry maps
-    return old
+    return SparsePattern(tables, model.n_dofs)
 
 
 def test_assembler_plans_get_the_blocks_of_the_full_positions_and_couplings_theirs(monkeypatch):
@@ -148,7 +147,7 @@ def test_assembler_plans_get_the_blocks_of_the_full_positions_and_couplings_thei
     group = model.groups[0]
     group.switch(model, np.arange(0, model.mesh.n_cells, 3), "stvk")
     asm = Assembler(model)
-    old = _reference_plans(asm, model)
+    old = _full_positions(model)
     for i, (part, plan) in enumerate(zip(model.parts, asm.plans)):
         full = old.positions[i] if part.index is None else old.positions[i][part.index]
         _same(plan.blocks, block_positions(full, 3), "blocks")
@@ -156,7 +155,7 @@ def test_assembler_plans_get_the_blocks_of_the_full_positions_and_couplings_thei
     press = Model(generate_bar(size=(1.0, 0.5, 0.5), cells=(3, 2, 2), element="tetra"),
                   [Material(law="neohookean", quadrature="gauss1", E=1e6, nu=0.45, formulation="nodal_pressure")])
     asm = Assembler(press)
-    old = _reference_plans(asm, press)
+    old = _full_positions(press)
     (c,) = press.couplings
     _same(c.positions, old.positions[c.part_index][c.rows], "coupling positions")
     for j, pos in enumerate(c.patch_positions):
@@ -175,3 +174,15 @@ def test_no_full_positions_on_the_setup_path(monkeypatch):
     asm = Assembler(model)
     asm.warm_up()
     assert asm.plans[0].blocks is not None and asm.plans[0].pos is None
+
+
+def test_assembly_is_bit_identical_to_the_old_pattern(monkeypatch):
+    """f and K through the new pattern's maps are the bytes the old build's maps gave."""
+    from tensormass.runtime import assembly
+    model = Model(generate_bar(size=(1.0, 0.5, 0.5), cells=(3, 2, 2), element="tetra10"),
+                  [Material(law="stvk", quadrature="gauss2", E=1e6, nu=0.3)])
+    u = 1e-3 * np.random.default_rng(2).standard_normal(model.n_dofs)
+    new = Assembler(model).forces_and_stiffness(u)
+    monkeypatch.setattr(assembly, "SparsePattern", _ReferencePattern)
+    old = Assembler(model).forces_and_stiffness(u)
+    assert new[0].tobytes() == old[0].tobytes() and new[1].tobytes() == old[1].tobytes()
