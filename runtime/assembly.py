@@ -25,6 +25,7 @@ from numba import njit
 from .. import laws
 from . import parallel as _parallel
 from .fused import block_positions
+from .pattern import SparsePattern, _node_tables  # noqa: F401  (SparsePattern: re-exported)
 from .errors import ElementError, InvertedElementError, TensormassError
 
 __all__ = ["Assembler", "assemble", "project_psd", "SparsePattern"]
@@ -151,122 +152,6 @@ def _project_psd_reference(K: np.ndarray) -> np.ndarray:
     return K
 
 
-# --------------------------------------------------------------------------- the pattern
-
-
-class SparsePattern:
-    """CSR structure of the global matrix and, per part, the scatter positions."""
-
-    def __init__(self, dof_tables, n_dofs: int, dofs_per_node: int | None = None):
-        self.n_dofs = n_dofs
-        # parts of one switchable group share their dof table: sort its entries once
-        first = {}
-        for i, d in enumerate(dof_tables):
-            first.setdefault(id(d), i)
-        owner = [first[id(d)] for d in dof_tables]
-        dof_tables = [dof_tables[i] for i in sorted(set(owner))]
-        nodes = _node_tables(dof_tables, n_dofs, dofs_per_node)
-        if nodes is None:
-            positions = self._by_dofs(dof_tables, n_dofs)
-        else:
-            positions = self._by_nodes(nodes, n_dofs // dofs_per_node, dofs_per_node)
-        slot = {o: j for j, o in enumerate(sorted(set(owner)))}
-        self.positions = [positions[slot[o]] for o in owner]
-
-    def _by_dofs(self, dof_tables, n_dofs):
-        """The pattern from every (row dof, column dof) pair of every element: one sort of n nd^2 keys."""
-        keys = [self._keys(d, n_dofs) for d in dof_tables]
-        diag = np.arange(n_dofs, dtype=np.int64) * (n_dofs + 1)   # keep every diagonal entry
-        uniq, inverse = np.unique(np.concatenate(keys + [diag]), return_inverse=True)
-        rows, cols = np.divmod(uniq, n_dofs)
-        itype = np.int32 if uniq.size < 2**31 - 1 else np.int64
-        self.indices = cols.astype(itype)
-        self.indptr = np.searchsorted(rows, np.arange(n_dofs + 1)).astype(itype)
-        self.nnz = uniq.size
-        positions, start = [], 0
-        for d, k in zip(dof_tables, keys):
-            nd = d.shape[1]
-            # int32 where the matrix allows it: the scatter reads these at every assembly
-            positions.append(inverse[start:start + k.size].reshape(len(d), nd, nd).astype(itype))
-            start += k.size
-        self.diagonal = inverse[start:].astype(np.int64)
-        self._rows = rows
-        return positions
-
-    def _by_nodes(self, node_tables, n_nodes, dpn):
-        """The same pattern from node pairs (node-major dofs: every node pair is a dense dpn x dpn
-        block): a sort of dpn^2 times fewer keys.  The tetra10 organ's 8 208 cells: 1.6 s -> 0.2 s."""
-        keys = [(c[:, :, None] * n_nodes + c[:, None, :]).ravel() for c in node_tables]
-        diag = np.arange(n_nodes, dtype=np.int64) * (n_nodes + 1)
-        uniq, inverse = np.unique(np.concatenate(keys + [diag]), return_inverse=True)
-        node_rows, node_cols = np.divmod(uniq, n_nodes)
-        node_indptr = np.searchsorted(node_rows, np.arange(n_nodes + 1))
-        comp = np.arange(dpn)
-        row_len = np.repeat(dpn * np.diff(node_indptr), dpn)               # per dof row
-        indptr = np.concatenate([[0], np.cumsum(row_len)])
-        nnz = int(indptr[-1])
-        itype = np.int32 if nnz < 2**31 - 1 else np.int64
-        # dof row (m, i) holds, for every node column c of node row m, the dpn columns c dpn + j
-        expanded = (node_cols[:, None] * dpn + comp).ravel()
-        start = np.repeat(np.repeat(node_indptr[:-1] * dpn, dpn), row_len)
-        within = np.arange(nnz) - np.repeat(indptr[:-1], row_len)
-        self.indices = expanded[start + within].astype(itype)
-        self.indptr = indptr.astype(itype)
-        self.nnz = nnz
-        self._rows = np.repeat(np.arange(n_nodes * dpn, dtype=np.int64), row_len)
-        positions, at = [], 0
-        for c, k in zip(node_tables, keys):
-            n, kn = c.shape
-            rel = (dpn * (inverse[at:at + k.size].reshape(n, kn, kn) - node_indptr[c][:, :, None])).astype(itype)
-            at += k.size
-            base = indptr[c[:, :, None] * dpn + comp].astype(itype)                    # (n, kn, dpn)
-            pos = base[:, :, :, None, None] + rel[:, :, None, :, None] + comp.astype(itype)   # (n, kn, dpn, kn, dpn)
-            positions.append(pos.reshape(n, kn * dpn, kn * dpn))
-        m = np.arange(n_nodes)
-        rel_diag = inverse[at:] - node_indptr[m]
-        self.diagonal = (indptr[m[:, None] * dpn + comp] + dpn * rel_diag[:, None] + comp).ravel().astype(np.int64)
-        return positions
-
-    @staticmethod
-    def _keys(dofs, n_dofs):
-        return (dofs[:, :, None] * n_dofs + dofs[:, None, :]).ravel().astype(np.int64)
-
-    def matrix(self, data: np.ndarray) -> sp.csr_matrix:
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_dofs, self.n_dofs))
-
-    def submatrix_map(self, rows_keep: np.ndarray, cols_keep: np.ndarray):
-        """Structure of the block (rows_keep, cols_keep), both sorted dof lists.
-
-        Returns (entries, indices, indptr, shape): the block's data is data[entries].
-        """
-        rmap = np.full(self.n_dofs, -1, dtype=np.int64)
-        rmap[rows_keep] = np.arange(rows_keep.size)
-        cmap = np.full(self.n_dofs, -1, dtype=np.int64)
-        cmap[cols_keep] = np.arange(cols_keep.size)
-        r, c = rmap[self._rows], cmap[self.indices]
-        entries = np.flatnonzero((r >= 0) & (c >= 0))
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(r[entries], minlength=rows_keep.size))])
-        shape = (rows_keep.size, cols_keep.size)
-        return entries, c[entries].astype(self.indices.dtype), indptr.astype(self.indptr.dtype), shape
-
-
-def _node_tables(dof_tables, n_dofs, dpn):
-    """Per dof table, its (n, k) node table when the dofs are node-major (dof = node dpn + i, the
-    runtime's layout: runtime.dofs); None when any table is not (then the pattern goes by dofs)."""
-    if not dpn or dpn < 1 or n_dofs % dpn:
-        return None
-    out = []
-    for d in dof_tables:
-        d = np.asarray(d, dtype=np.int64)
-        if d.ndim != 2 or d.shape[1] % dpn:
-            return None
-        nodes = d[:, ::dpn] // dpn
-        if not np.array_equal(d.reshape(len(d), -1, dpn), nodes[:, :, None] * dpn + np.arange(dpn)):
-            return None
-        out.append(nodes)
-    return out
-
-
 # --------------------------------------------------------------------------- element blocks
 
 # Evaluation and scatter run block by block: a block of consecutive elements is gathered,
@@ -373,10 +258,14 @@ def _scatter_block_K_nodes(data, Ke, blocks, dpn, start, m):
                     data[base + j] += Ke[e, r, b * dpn + j]
 
 
-def _node_blocks(pos, dpn):
-    """block_positions(pos, dpn), or None when the dofs are not node-major (full positions then)."""
+def _node_blocks(pos, dpn, blocks=None):
+    """The node-blocked map: the pattern's `blocks` when given (node-major dofs), else
+    block_positions(pos, dpn) (pos: the per-entry map or a callable building it); None when the
+    dofs are not node-major (full positions then)."""
+    if blocks is not None:
+        return blocks
     try:
-        return block_positions(pos, dpn)
+        return block_positions(pos() if callable(pos) else pos, dpn)
     except TensormassError:
         return None
 
@@ -411,9 +300,13 @@ def _releases_gil(kernel) -> bool:
 class _Plan:
     """One part's blocks, their colours, per-thread element buffers and its flags/energy arrays."""
 
-    def __init__(self, part, pos, dofs_per_node: int, parallel):
+    def __init__(self, part, pos, dofs_per_node: int, parallel, blocks=None, index_dtype=None):
+        """pos: the per-entry map of the active cells, or a callable building it (only needed when
+        there is no node-blocked map); blocks: their node-blocked map from the pattern (node-major
+        dofs) or None; index_dtype: the per-entry map's index type when pos is a callable."""
         k = part.kernel
         self.part, self.pos = part, pos
+        index_bytes = np.dtype(index_dtype).itemsize if callable(pos) else pos.dtype.itemsize
         self.n = part.n_active
         self.cells = np.ascontiguousarray(part.cells_active, dtype=np.int64)
         self.dofs = np.ascontiguousarray(part.dofs_active, dtype=np.int64)
@@ -422,7 +315,7 @@ class _Plan:
         # A hand-written kernel (runtime.custom_kernels) has no generated module to write into
         # buffers: it is called through its own methods, on the whole part at once.
         self.generic = getattr(k, "module", None) is None
-        self.block = max(1, min(self.n, block_size(self.nd, self.k, dofs_per_node, self.D.shape[1], pos.dtype.itemsize)))
+        self.block = max(1, min(self.n, block_size(self.nd, self.k, dofs_per_node, self.D.shape[1], index_bytes)))
         if self.generic:
             self.block = max(1, self.n)
         n_blocks = (self.n + self.block - 1) // self.block
@@ -443,7 +336,9 @@ class _Plan:
         self.flags = np.zeros(self.n, dtype=np.int32)
         self.energy = np.zeros(self.n)
         # one node-blocked map serves the buffered scatter and the fused kernels
-        self.blocks = _node_blocks(pos, dofs_per_node) if self.n else None
+        self.blocks = _node_blocks(pos, dofs_per_node, blocks) if self.n else None
+        if callable(self.pos):
+            self.pos = self.pos() if self.blocks is None else None
         self.fused = _fused(k) if self.blocks is not None else None
         self._scratch_f = None
         self._buffers = []
@@ -487,11 +382,14 @@ class Assembler:
         extra = [t for c in couplings for t in c.patch_tables]
         self.pattern = SparsePattern([p.dofs for p in model.parts] + extra, model.n_dofs, model.dofs_per_node)
         n_parts = len(model.parts)
-        extra_positions = iter(self.pattern.positions[n_parts:])
-        self.pattern.positions = self.pattern.positions[:n_parts]
+        # couplings get per-entry maps of their cells and patches only (node-major dofs: expanded
+        # from the node-blocked maps, not the whole parts')
+        at = n_parts
         for c in couplings:
-            c.positions = self.pattern.positions[c.part_index][c.rows]
-            c.patch_positions = [next(extra_positions) for _ in c.patch_tables]
+            c.positions = self.pattern.table_positions(c.part_index, c.rows)
+            c.patch_positions = [self.pattern.table_positions(at + j) for j in range(len(c.patch_tables))]
+            at += len(c.patch_tables)
+        self.pattern.keep(n_parts)
         self.couplings = couplings
         self._parallel_option = parallel
         # Parts of a law quadratic in grad u (Hooke) have a constant K and f_int = -K u:
@@ -506,12 +404,30 @@ class Assembler:
     def refresh(self) -> None:
         """Re-read which cells each part models (after a law switch); the pattern stays."""
         parts = self.model.parts
-        self.positions = [pos if p.index is None else pos[p.index]
-                          for p, pos in zip(parts, self.pattern.positions)]
         dpn = self.model.dofs_per_node
-        self.plans = [_Plan(p, pos, dpn, self._parallel_option) for p, pos in zip(parts, self.positions)]
+        self._positions = None
+        pattern = self.pattern
+        self.plans = []
+        for i, (p, blocks) in enumerate(zip(parts, pattern.blocks)):
+            # node-major dofs: the node-blocked map straight from the pattern; the per-entry map
+            # is built only for a plan that has none
+            if blocks is not None and p.index is not None:
+                blocks = np.ascontiguousarray(blocks[p.index])
+            self.plans.append(_Plan(p, lambda i=i: self._part_positions(i), dpn, self._parallel_option,
+                                    blocks, pattern.index_dtype))
         self.parallel = [plan.parallel for plan in self.plans]
         self._constant_K = None
+
+    def _part_positions(self, i: int) -> np.ndarray:
+        p = self.model.parts[i]
+        return self.pattern.table_positions(i, p.index)
+
+    @property
+    def positions(self) -> list:
+        """Per part, the per-entry map (n_active, nd, nd) of its active cells, built on first use."""
+        if self._positions is None:
+            self._positions = [self._part_positions(i) for i in range(len(self.model.parts))]
+        return self._positions
 
     # -- parts ----------------------------------------------------------------------------------
     def _u(self, part, u):
@@ -766,7 +682,7 @@ class Assembler:
                 np.zeros((1, k, self.model.dofs_per_node)))
         dofs = np.ascontiguousarray(p.dofs[:1], dtype=np.int64)
         _scatter_block_f(f, np.zeros((1, nd)), dofs, 0, 1)
-        _scatter_block_K(data, np.zeros((1, nd, nd)), self.pattern.positions[0][:1], 0, 1)
+        _scatter_block_K(data, np.zeros((1, nd, nd)), np.zeros((1, nd, nd), dtype=self.pattern.index_dtype), 0, 1)
         plan = self.plans[0]
         if plan.blocks is not None:
             _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.blocks,
