@@ -14,8 +14,9 @@ The peak is modelled phase by phase after what the runtime allocates:
     mesh        points and cells, held all run; check_mesh's face tables (transient)
     model       element constants D (n_cells x "constants" of the kernel's manifest entry,
                 float64, once per law a cell can be switched to), dof tables, nodal vectors
-    pattern     SparsePattern: the (n_cells, k*dim, k*dim) scatter positions (int64) are
-                held; building them sorts that many keys (PATTERN_BUILD copies at the peak)
+    pattern     SparsePattern (runtime.pattern): the CSR structure and the node-blocked scatter map
+                (n_cells, k*dim, k) int32, built in one pass over the cells (PATTERN_BUILD bytes
+                per cell int of marker and incidence arrays at the peak)
     step        element stiffness blocks: the assembler's blocks of about BLOCK_BYTES per
                 thread (PROJECTION_BLOCK times that while PSD projection runs; before the
                 blocked assembler, a whole (n_cells, k*dim, k*dim) array and PROJECTION), copies of the
@@ -80,14 +81,14 @@ KERNEL_CODE = 16 * MiB
 
 # Coefficients measured with tracemalloc around each phase (hexahedron, tetra, tetra10 and
 # pyramid bars of 0.4-5.8 M element matrix entries):
-PATTERN_BUILD = 8.0      # SparsePattern.__init__ peak / (8 B x element matrix entries): 7.3-7.6 measured
+PATTERN_BUILD = 40       # B per cell int while runtime.pattern builds (incidence, markers, node CSR): 37 measured
 PROJECTION = 9.5         # step peak with PSD projection / element matrix bytes: 8.0-9.3 (1.8-3.3 without)
 # Since the assembler projects block by block (runtime.assembly): the block, the copy of its
 # indefinite elements, their eigenvectors and the rebuild's temporaries.
 PROJECTION_BLOCK = 5.0
 MESH_CHECK = 26.0        # check_mesh transient / bytes of points and cells: 8-26
-NNZ_HELD = 12 + 19       # B per nonzero: CSR indices + row ids (12), Dirichlet submatrix maps (12-19)
-NNZ_SETUP = 36           # B per nonzero while the submatrix maps are built (transient)
+NNZ_HELD = 4 + 12        # B per nonzero: CSR indices (int32), Dirichlet submatrix maps (int64 entries, int32 columns)
+NNZ_SETUP = 8            # B per nonzero while the submatrix maps are built (numba: counts, then fills; 7.7 measured)
 NNZ_STEP = 24            # B per nonzero per step: data, its copy with the mass, K_ff (measured 12-14 + IC)
 IC_BYTES = 6             # IC(0) factor: the lower half of the pattern, float64 values + int32 indices
 BAND_BYTES = 12          # float32 band factor plus its float64 redo when float32 fails (both alive)
@@ -545,10 +546,10 @@ class _Estimator:
         dim = self.dpn                       # from here on: per-node dofs
         model = 8 * self.cell_ints * (1 + dim) + CELL_BYTES * sum(c.cells.values()) + DOF_BYTES * self.dofs
         matrices = 8 * self.entries
-        # positions are int32 below 2**31 nonzeros (runtime.assembly), plus the assembler's
-        # node-block map and int64 copies of cells and dof tables
-        pattern = (matrices // 2 if self.nnz < 2**31 - 1 else matrices) + NNZ_HELD * self.nnz \
-            + 8 * self.cell_ints * (2 + dim)
+        # the node-blocked map is int32 below 2**31 nonzeros (runtime.pattern; full positions are
+        # only built on demand), plus int64 copies of cells and dof tables
+        blocks_map = (matrices // (2 * dim) if self.nnz < 2**31 - 1 else matrices // dim)
+        pattern = blocks_map + NNZ_HELD * self.nnz + 8 * self.cell_ints * (2 + dim)
         # the assembler evaluates blocks of about BLOCK_BYTES per thread, never a whole-part K
         blocks = min(matrices, 2 * _assembly_block_bytes() * _threads())
         if self.kind == "explicit":          # element forces only; the pattern is still built
@@ -559,7 +560,8 @@ class _Estimator:
         phases = {                           # what is allocated on top of the runtime, mesh and history
             "mesh check": {"mesh check": MESH_CHECK * mesh},
             "sparsity pattern build": {"constants": constants, "model": model,
-                                       "pattern build": PATTERN_BUILD * matrices},
+                                       "pattern build": blocks_map + NNZ_HELD * self.nnz
+                                       + PATTERN_BUILD * self.cell_ints},
             "Dirichlet maps": {"constants": constants, "model": model, "pattern": pattern,
                                "Dirichlet maps": NNZ_SETUP * self.nnz},
             "time steps": {"constants": constants, "model": model, "pattern": pattern, **step},
