@@ -300,10 +300,13 @@ def _releases_gil(kernel) -> bool:
 class _Plan:
     """One part's blocks, their colours, per-thread element buffers and its flags/energy arrays."""
 
-    def __init__(self, part, pos, dofs_per_node: int, parallel, blocks=None, index_dtype=None):
+    def __init__(self, part, pos, dofs_per_node: int, parallel, blocks=None, index_dtype=None, colours=None):
         """pos: the per-entry map of the active cells, or a callable building it (only needed when
         there is no node-blocked map); blocks: their node-blocked map from the pattern (node-major
-        dofs) or None; index_dtype: the per-entry map's index type when pos is a callable."""
+        dofs) or None; index_dtype: the per-entry map's index type when pos is a callable; colours:
+        (segment, order, starts) of a plan of the same cells before a cut, reused when the segments
+        are the same (a cut gives a new node only to cells that shared its parent, so segments that
+        shared no node still share none)."""
         k = part.kernel
         self.part, self.pos = part, pos
         index_bytes = np.dtype(index_dtype).itemsize if callable(pos) else pos.dtype.itemsize
@@ -324,11 +327,15 @@ class _Plan:
         # (locality), and only segments of one colour run at once: every entry of f and K gets
         # its contributions in the same order whatever the thread count.
         self.segment = self.block * max(1, -(-n_blocks // SEGMENTS))
-        colour = _block_colours(self.cells, self.segment) if self.n else np.zeros(0, dtype=np.int64)
-        self.order = np.argsort(colour, kind="stable")
-        self.starts = np.concatenate([[0], np.cumsum(np.bincount(colour, minlength=int(colour.max(initial=-1)) + 1))])
+        n_segments = -(-self.n // self.segment) if self.n else 0
+        if colours is not None and colours[0] == self.segment and len(colours[1]) == n_segments:
+            self.order, self.starts = colours[1], colours[2]
+        else:
+            colour = _block_colours(self.cells, self.segment) if self.n else np.zeros(0, dtype=np.int64)
+            self.order = np.argsort(colour, kind="stable")
+            self.starts = np.concatenate([[0], np.cumsum(np.bincount(colour, minlength=int(colour.max(initial=-1)) + 1))])
         self.n_blocks = n_blocks
-        self.n_segments = len(colour)
+        self.n_segments = n_segments
         entries = self.n * self.nd * self.nd
         if parallel is None:
             parallel = entries >= PARALLEL_MIN_ENTRIES
@@ -375,12 +382,17 @@ class Assembler:
     thread count (runtime.parallel): results are bit-identical for 1 and more threads.
     """
 
-    def __init__(self, model, parallel: bool | None = None):
+    def __init__(self, model, parallel: bool | None = None, colours=None, grow_from=None):
+        """colours: Assembler.colours() of this model before a cut (runtime.cutting), to reuse;
+        grow_from: that model's pattern, to grow by the cut's new nodes (SparsePattern.grown)."""
         self.model = model
+        self._colours_from = colours
         couplings = getattr(model, "couplings", [])
         # nodal-pressure couplings join the nodes around a node: their patches widen the pattern
         extra = [t for c in couplings for t in c.patch_tables]
-        self.pattern = SparsePattern([p.dofs for p in model.parts] + extra, model.n_dofs, model.dofs_per_node)
+        tables = [p.dofs for p in model.parts] + extra
+        grown = SparsePattern.grown(grow_from, tables, model.n_dofs) if grow_from is not None and not extra else None
+        self.pattern = grown if grown is not None else SparsePattern(tables, model.n_dofs, model.dofs_per_node)
         n_parts = len(model.parts)
         # couplings get per-entry maps of their cells and patches only (node-major dofs: expanded
         # from the node-blocked maps, not the whole parts')
@@ -413,8 +425,10 @@ class Assembler:
             # is built only for a plan that has none
             if blocks is not None and p.index is not None:
                 blocks = np.ascontiguousarray(blocks[p.index])
+            reuse = self._colours_from[i] if self._colours_from is not None else None
             self.plans.append(_Plan(p, lambda i=i: self._part_positions(i), dpn, self._parallel_option,
-                                    blocks, pattern.index_dtype))
+                                    blocks, pattern.index_dtype, reuse))
+        self._colours_from = None                # a law switch later: colour afresh
         self.parallel = [plan.parallel for plan in self.plans]
         self._constant_K = None
 
@@ -428,6 +442,10 @@ class Assembler:
         if self._positions is None:
             self._positions = [self._part_positions(i) for i in range(len(self.model.parts))]
         return self._positions
+
+    def colours(self) -> list:
+        """(segment, order, starts) of every part's plan: what a model cut from this one may reuse."""
+        return [(plan.segment, plan.order, plan.starts) for plan in self.plans]
 
     # -- parts ----------------------------------------------------------------------------------
     def _u(self, part, u):

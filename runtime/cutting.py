@@ -71,10 +71,10 @@ def touched_node_mask(n_points: int, nodes) -> np.ndarray:
 def separated(model, split: Split):
     """The model after `split` (runtime.topology.separate on model.mesh)."""
     check_model(model)
+    _keep_incidence(model, split)
     mesh = split.apply(model.mesh)
     new = _start(model, mesh)
-    changed = split.changed_cells
-    new.parts = _renumbered_parts(model, mesh, changed)
+    new.parts = _renumbered_parts(model, split)
     new.groups = [LawGroup(list(g.parts), list(g.laws), g.current.copy(), g.previous.copy()) for g in model.groups]
     parents = split.parents
     touched = split.touched_nodes
@@ -155,25 +155,27 @@ def _share_dof_tables(old_parts, new_parts) -> None:
             seen[id(old.dofs)] = new.dofs
 
 
-def _renumbered_parts(model, mesh, changed: np.ndarray) -> list:
-    """Parts with the rows of the changed cells taken from the new mesh (constants untouched)."""
-    off = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])])
-    block = np.searchsorted(off, changed, side="right") - 1
-    new_nodes = {int(c): mesh.blocks[b].cells[c - off[b]] for c, b in zip(changed, block)}
+def _renumbered_parts(model, split: Split) -> list:
+    """Parts with the split's renumberings applied to their rows (constants untouched)."""
     dpn = model.dofs_per_node
+    n_cells = model.mesh.n_cells
     parts, tables = [], {}
     for part in model.parts:
-        rows = np.flatnonzero(np.isin(part.cell_ids, changed))
+        row_of = np.full(n_cells, -1, dtype=np.int64)
+        row_of[part.cell_ids] = np.arange(len(part.cell_ids))
+        rows = row_of[split.cells]
+        mine = rows >= 0
         cells = part.cells
-        if rows.size:
+        if mine.any():
             cells = part.cells.copy()
-            cells[rows] = np.array([new_nodes[int(c)] for c in part.cell_ids[rows]])
+            cells[rows[mine], split.local[mine]] = split.node[mine]
         key = id(part.dofs)
         if key not in tables:
             dofs = part.dofs
-            if rows.size:
+            if mine.any():
+                changed = np.unique(rows[mine])
                 dofs = part.dofs.copy()
-                dofs[rows] = node_dofs(cells[rows], dpn)
+                dofs[changed] = node_dofs(cells[changed], dpn)
             tables[key] = dofs
         parts.append(_part(part, cells=cells, dofs=tables[key]))
     return parts
@@ -294,6 +296,12 @@ def _owners(model, faces: np.ndarray) -> np.ndarray:
     if inc is None:
         inc = model._incidence = incidence(model.mesh)
     return face_owners(model.mesh, faces, inc)
+
+
+def _keep_incidence(model, split) -> None:
+    """The split's incidence is the old mesh's: face owners for the loads need no second pass."""
+    if getattr(split, "incidence", None) is not None and getattr(model, "_incidence", None) is None:
+        model._incidence = split.incidence
 
 
 def _face_loads(model, new, split: Split) -> None:

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
+from numba import njit, prange
 
 __all__ = ["SparsePattern", "node_tables"]
 
@@ -132,12 +132,13 @@ def _node_pattern(flat, estart, bstart, n_nodes, dpn, blocks):
     return node_indptr, cols[:at].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _dof_pattern(node_indptr, node_cols, dpn, indptr, indices, diagonal):
     """The dof-level CSR of node-major dofs: row (m, i) holds columns c dpn + j for every node c of
-    node row m; diagonal[(m, i)] = its entry (m dpn + i, m dpn + i)."""
+    node row m; diagonal[(m, i)] = its entry (m dpn + i, m dpn + i).  Node rows write disjoint
+    slots: the threads' split does not change a bit."""
     n_nodes = node_indptr.size - 1
-    for m in range(n_nodes):
+    for m in prange(n_nodes):
         lo = node_indptr[m]
         deg = node_indptr[m + 1] - lo
         rel = 0
@@ -156,33 +157,91 @@ def _dof_pattern(node_indptr, node_cols, dpn, indptr, indices, diagonal):
     indptr[n_nodes * dpn] = dpn * dpn * node_indptr[n_nodes]
 
 
-@njit(cache=True)
-def _submatrix(indptr, indices, rows_keep, cols_keep, n_dofs, out_indices, out_indptr):
-    """Entries of the block (rows_keep, cols_keep) in CSR order: count, then fill."""
+@njit(cache=True, parallel=True)
+def _submatrix(indptr, indices, rows_keep, cols_keep, n_dofs, out_indptr):
+    """Entries of the block (rows_keep, cols_keep) in CSR order: count per row, prefix sums, fill;
+    rows in parallel, each writing its own slots (the same bits for any thread count)."""
     cmap = np.full(n_dofs, -1, dtype=np.int64)
     for j in range(cols_keep.size):
         cmap[cols_keep[j]] = j
-    count = 0
-    for i in range(rows_keep.size):
+    n = rows_keep.size
+    counts = np.zeros(n, dtype=np.int64)
+    for i in prange(n):
         row = rows_keep[i]
+        c = 0
         for p in range(indptr[row], indptr[row + 1]):
             if cmap[indices[p]] >= 0:
-                count += 1
-    entries = np.empty(count, dtype=np.int64)
-    cols = np.empty(count, dtype=np.int64)
-    at = 0
+                c += 1
+        counts[i] = c
     out_indptr[0] = 0
-    for i in range(rows_keep.size):
+    for i in range(n):
+        out_indptr[i + 1] = out_indptr[i] + counts[i]
+    count = out_indptr[n]
+    entries = np.empty(count, dtype=np.int64)
+    out_indices = np.empty(count, dtype=indices.dtype)
+    for i in prange(n):
         row = rows_keep[i]
+        at = out_indptr[i]
         for p in range(indptr[row], indptr[row + 1]):
             c = cmap[indices[p]]
             if c >= 0:
                 entries[at] = p
-                cols[at] = c
+                out_indices[at] = c
                 at += 1
-        out_indptr[i + 1] = at
-    out_indices[:count] = cols
-    return entries, count
+    return entries, out_indices
+
+
+@njit(cache=True)
+def _grow_nodes(old_ptr, old_cols, n_nodes, add_rows, add_cols):
+    """The node CSR of old_ptr/old_cols (n_old rows) with the sorted, unique (row, col) pairs added:
+    every added column of an old row is a new node (ids >= n_old), so it goes after the old ones."""
+    n_old = old_ptr.size - 1
+    count = np.zeros(n_nodes + 1, dtype=np.int64)
+    for m in range(n_old):
+        count[m + 1] = old_ptr[m + 1] - old_ptr[m]
+    for q in range(add_rows.size):
+        count[add_rows[q] + 1] += 1
+    ptr = np.zeros(n_nodes + 1, dtype=np.int64)
+    for m in range(n_nodes):
+        ptr[m + 1] = ptr[m] + count[m + 1]
+    cols = np.empty(ptr[n_nodes], dtype=np.int64)
+    fill = ptr[:-1].copy()
+    for m in range(n_old):
+        for p in range(old_ptr[m], old_ptr[m + 1]):
+            cols[fill[m]] = old_cols[p]
+            fill[m] += 1
+    for q in range(add_rows.size):
+        m = add_rows[q]
+        cols[fill[m]] = add_cols[q]
+        fill[m] += 1
+    return ptr, cols
+
+
+@njit(cache=True, parallel=True)
+def _blocks_from_rows(flat, estart, bstart, node_indptr, node_cols, dpn, blocks):
+    """The node-blocked map of every cell from a node CSR with sorted rows (binary search of each
+    node in its neighbours' rows); cells write their own entries, in parallel."""
+    for g in prange(estart.size - 1):
+        e0 = estart[g]
+        k = estart[g + 1] - e0
+        o = bstart[g]
+        for a in range(k):
+            m = flat[e0 + a]
+            lo = node_indptr[m]
+            deg = node_indptr[m + 1] - lo
+            base = dpn * dpn * lo
+            for b in range(k):
+                c = flat[e0 + b]
+                left, right = lo, lo + deg
+                while left < right:
+                    mid = (left + right) // 2
+                    if node_cols[mid] < c:
+                        left = mid + 1
+                    else:
+                        right = mid
+                at = base + dpn * (left - lo)
+                for i in range(dpn):
+                    blocks[o + (a * dpn + i) * k + b] = at + i * dpn * deg
 
 
 # --------------------------------------------------------------------------- the pattern
@@ -218,6 +277,66 @@ class SparsePattern:
             self._blocks, self._positions = [None] * len(tables), self._by_dofs(tables, n_dofs)
         else:
             self._blocks, self._positions = self._by_nodes(nodes, n_dofs // dofs_per_node, dofs_per_node)
+
+    @classmethod
+    def grown(cls, old: "SparsePattern", dof_tables, n_dofs: int) -> "SparsePattern":
+        """The pattern of dof_tables after a cut (runtime.cutting): old's, with the couplings of the
+        new nodes (ids from old's node count on) added at the ends of the rows.  Old couplings a cut
+        ends stay as explicit zeros (a superset pattern: every matrix is the same, the solvers see a
+        few more stored entries); no global sort, no incidence pass.  None when old is not node-major
+        or the tables are shared between parts (switchable groups): build afresh then."""
+        dpn = old.dofs_per_node
+        if old.node_indptr is None or not dpn or len({id(d) for d in dof_tables}) != len(dof_tables):
+            return None
+        nodes = _node_tables(list(dof_tables), n_dofs, dpn)
+        if nodes is None:
+            return None
+        n_old, n_nodes = old.node_indptr.size - 1, n_dofs // dpn
+        pairs = []
+        for c in nodes:
+            c = c[(c >= n_old).any(axis=1)]          # the cells holding a new node
+            if len(c):
+                k = c.shape[1]
+                a, b = np.repeat(c, k, axis=1).ravel(), np.tile(c, (1, k)).ravel()
+                keep = (a >= n_old) | (b >= n_old)
+                pairs.append(np.stack([a[keep], b[keep]], axis=1))
+        new_nodes = np.arange(n_old, n_nodes, dtype=np.int64)
+        pairs.append(np.stack([new_nodes, new_nodes], axis=1))   # every diagonal
+        pairs = np.vstack(pairs)
+        key = np.unique(pairs[:, 0] * np.int64(n_nodes) + pairs[:, 1])   # sorted by row, then column
+        pairs = np.stack([key // n_nodes, key % n_nodes], axis=1)
+        self = cls.__new__(cls)
+        self.n_dofs, self.dofs_per_node = n_dofs, dpn
+        self._owner = list(range(len(nodes)))
+        self._rows_cache = None
+        node_indptr, node_cols = _grow_nodes(old.node_indptr, old.node_cols, n_nodes, pairs[:, 0], pairs[:, 1])
+        self.node_indptr, self.node_cols = node_indptr, node_cols
+        nnz = int(dpn * dpn * node_indptr[-1])
+        itype = np.int32 if nnz < INDEX_LIMIT else np.int64
+        self.index_dtype, self.nnz = itype, nnz
+        self.indptr = np.empty(n_nodes * dpn + 1, dtype=itype)
+        self.indices = np.empty(nnz, dtype=itype)
+        self.diagonal = np.empty(n_nodes * dpn, dtype=np.int64)
+        _dof_pattern(node_indptr, node_cols, dpn, self.indptr, self.indices, self.diagonal)
+        self._blocks = []
+        for c in nodes:
+            c = np.ascontiguousarray(c, dtype=np.int64)
+            n, k = c.shape
+            estart = np.arange(n + 1, dtype=np.int64) * k
+            bstart = np.arange(n + 1, dtype=np.int64) * (dpn * k * k)
+            flat = np.empty(n * dpn * k * k, dtype=itype)
+            _blocks_from_rows(c.ravel(), estart, bstart, node_indptr, node_cols, dpn, flat)
+            self._blocks.append(flat.reshape(n, dpn * k, k))
+        self._positions = [None] * len(nodes)
+        return self
+
+    @classmethod
+    def warm_up_growth(cls) -> None:
+        """Load the compiled functions `grown` uses (numba's cache) on a toy: a run with [[cut]]
+        events calls this at setup, so that its first cut does not pay for it."""
+        def dofs(cells):                        # node-major dofs of one tetrahedron, 3 per node
+            return np.repeat(np.array([cells]) * 3, 3, axis=1) + np.tile(np.arange(3), 4)
+        cls.grown(cls([dofs([0, 1, 2, 3])], 12, 3), [dofs([0, 1, 2, 4])], 15)
 
     @classmethod
     def rebuild(cls, node_tables, n_nodes: int, dofs_per_node: int) -> "SparsePattern":
@@ -354,12 +473,11 @@ class SparsePattern:
         cols_keep = np.asarray(cols_keep)
         if not (_strictly_increasing(rows_keep) and _strictly_increasing(cols_keep)):
             return _reference_submatrix_map(self, rows_keep, cols_keep)
-        out_indices = np.empty(self.nnz, dtype=self.indices.dtype)
         out_indptr = np.empty(rows_keep.size + 1, dtype=self.indptr.dtype)
-        entries, count = _submatrix(self.indptr, self.indices, rows_keep.astype(np.int64, copy=False),
-                                    cols_keep.astype(np.int64, copy=False), self.n_dofs, out_indices, out_indptr)
+        entries, out_indices = _submatrix(self.indptr, self.indices, rows_keep.astype(np.int64, copy=False),
+                                          cols_keep.astype(np.int64, copy=False), self.n_dofs, out_indptr)
         shape = (rows_keep.size, cols_keep.size)
-        return entries, out_indices[:count].copy(), out_indptr, shape
+        return entries, out_indices, out_indptr, shape
 
 
 def _int32_or_none(b):

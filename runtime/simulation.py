@@ -28,6 +28,7 @@ from .history import History, units as _units
 from .integrators import Context, Explicit, make_integrator, stable_time_step
 from .model import Model
 from . import reactions as _reactions
+from .assembly import Assembler
 from .refine import interpolate_nodal
 from .topology_events import TopologyEvents
 
@@ -389,11 +390,14 @@ class Simulation:
                 return
             self.integrator.step(k)          # equilibrium of the adapted model at the same load
 
-    def _rebuild(self, model, parents, u=None, v=None) -> None:
+    def _rebuild(self, model, parents, u=None, v=None, colours=None) -> None:
         """Carry the state and the counters over to a refined model (new pattern, masses, constants);
-        u, v: the new model's state when the caller has it (a topology change), else interpolated."""
+        u, v: the new model's state when the caller has it (a topology change), else interpolated;
+        colours: the assembler's colouring to reuse (a cut keeps it valid); then the pattern grows too
+        (runtime.pattern.SparsePattern.grown: the new nodes' couplings added, nothing rebuilt)."""
         old, dim = self.ctx, model.dofs_per_node
-        ctx = Context(model)
+        ctx = Context(model, Assembler(model, colours=colours, grow_from=old.asm.pattern)
+                      if colours is not None else None)
         model.warm_up()
         ctx.asm.warm_up()
         ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel() if u is None else u
@@ -401,6 +405,8 @@ class Simulation:
         ctx.t = old.t
         ctx.newton_iterations, ctx.linear_iterations = old.newton_iterations, old.linear_iterations
         ctx.asm.time, ctx.linear.time = old.asm.time, old.linear.time
+        for method, count in old.linear.counts.items():           # the summary counts every solve
+            ctx.linear.counts[method] = ctx.linear.counts.get(method, 0) + count
         self.model, self.ctx = model, ctx
         self.integrator = make_integrator(ctx)
         if isinstance(self.integrator, Explicit):
@@ -417,7 +423,11 @@ class Simulation:
             return
         model, u, v = changed
         start = time.perf_counter()
-        self._rebuild(model, None, u=u, v=v)
+        # only cuts since the last model (same cells): the colouring of the assembly stays valid
+        cut_only = all(r["kind"] == "cut" for r in self.topology.records[-self.topology.last_count:])
+        same_cells = len(model.parts) == len(self.model.parts) and all(
+            a.n_active == b.n_active for a, b in zip(model.parts, self.model.parts))
+        self._rebuild(model, None, u=u, v=v, colours=self.ctx.asm.colours() if cut_only and same_cells else None)
         record = self.topology.records[-1]
         record["seconds"]["solver"] = time.perf_counter() - start
         record["seconds"]["total"] = sum(record["seconds"].values())

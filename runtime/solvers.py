@@ -539,10 +539,17 @@ class ConstrainedSystem:
         # rigid-body modes of the free dofs (multigrid's near-nullspace), or None
         self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
-        self.fc = pattern.submatrix_map(free, fixed) if fixed.size else None
+        self._fc = None                  # free/fixed block: built on first use (moving constraints only)
         if free.size:
             _, indices, indptr, _ = self.ff
             warm_up(indices.dtype, indptr.dtype)
+
+    @property
+    def fc(self):
+        """The free/fixed block's map (None without fixed dofs), built when a constraint first moves."""
+        if self._fc is None and self.fixed.size:
+            self._fc = self.pattern.submatrix_map(self.free, self.fixed)
+        return self._fc
 
     @staticmethod
     def _block(data, block):
@@ -553,7 +560,7 @@ class ConstrainedSystem:
         """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations)."""
         x = np.zeros(self.pattern.n_dofs)
         rhs = b[self.free]
-        if x_c is not None and self.fc is not None and np.any(x_c):
+        if x_c is not None and self.fixed.size and np.any(x_c):
             x[self.fixed] = x_c
             rhs = rhs - self._block(data, self.fc) @ x_c
         guess = None if x0 is None else x0[self.free]

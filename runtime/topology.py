@@ -120,22 +120,29 @@ def _cell_nodes(mesh: Mesh, cell_ids: np.ndarray) -> list:
 
 
 def face_owners(mesh: Mesh, faces: np.ndarray, inc: Incidence | None = None) -> np.ndarray:
-    """The cell owning each boundary face (n, kf): the cell around its first node holding all of
+    """The cell owning each boundary face (n, kf): the first cell around its first node holding all of
     its nodes (-1: none)."""
     faces = np.asarray(faces, dtype=np.int64)
     if not len(faces):
         return np.zeros(0, dtype=np.int64)
     faces = faces.reshape(len(faces), -1)
     inc = incidence(mesh) if inc is None else inc
-    off = _offsets(mesh)
+    first = faces[:, 0]
+    counts = inc.ptr[first + 1] - inc.ptr[first]
+    which = np.repeat(np.arange(len(faces)), counts)
+    at = np.repeat(inc.ptr[first] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    cells = inc.cell[at]
+    block, row = _locate(mesh, cells)
+    k = max(b.cells.shape[1] for b in mesh.blocks)
+    nodes = np.full((cells.size, k), -1, dtype=np.int64)
+    for b in np.unique(block):
+        mine = block == b
+        nodes[mine, :mesh.blocks[b].cells.shape[1]] = mesh.blocks[b].cells[row[mine]]
+    holds = (faces[which][:, :, None] == nodes[:, None, :]).any(axis=2).all(axis=1)
     owners = np.full(len(faces), -1, dtype=np.int64)
-    for i, f in enumerate(faces):
-        a = int(f[0])
-        for c in inc.cell[inc.ptr[a]:inc.ptr[a + 1]]:
-            b = int(np.searchsorted(off, c, side="right") - 1)
-            if np.isin(f, mesh.blocks[b].cells[c - off[b]]).all():
-                owners[i] = c
-                break
+    hit = np.flatnonzero(holds)
+    face, firsts = np.unique(which[hit], return_index=True)     # candidates in increasing cell id
+    owners[face] = cells[hit[firsts]]
     return owners
 
 
@@ -273,7 +280,7 @@ class Split:
                 hit = touched[f].any(axis=1) if f.ndim == 2 and f.size else np.zeros(len(f), bool)
                 if hit.any():
                     f = f.copy()
-                    f[hit] = self.map_faces(f[hit], face_owners(mesh, f[hit]))
+                    f[hit] = self.map_faces(f[hit], face_owners(mesh, f[hit], getattr(self, "incidence", None)))
                 faces[name] = f
             out.append(replace(g, cells=faces) if faces else g)
         return out
@@ -312,19 +319,19 @@ def _pair_faces(mesh: Mesh, pairs: np.ndarray) -> np.ndarray:
     order = np.lexsort(keys.T[::-1])
     k, o = keys[order], owner[order]
     same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
-    shared = {(int(min(o[i], o[i + 1])), int(max(o[i], o[i + 1]))): k[i] for i in same}
-    out, bad = [], []
-    for a, b in pairs:
-        key = shared.get((int(min(a, b)), int(max(a, b))))
-        if key is None:
-            bad.append((int(a), int(b)))
-        else:
-            out.append(key)
-    if bad:
+    n = np.int64(mesh.n_cells)
+    code = np.minimum(o[same], o[same + 1]) * n + np.maximum(o[same], o[same + 1])
+    by_code = np.argsort(code)
+    code, shared = code[by_code], k[same][by_code]
+    want = pairs.min(axis=1) * n + pairs.max(axis=1)
+    at = np.minimum(np.searchsorted(code, want), max(code.size - 1, 0))
+    found = (code.size > 0) & (code[at] == want) if code.size else np.zeros(len(pairs), bool)
+    if not np.all(found):
+        bad = pairs[~found]
         shown = ", ".join(f"{a}-{b}" for a, b in bad[:6]) + (" ..." if len(bad) > 6 else "")
         raise TopologyError(f"cut: {len(bad)} cell pair(s) share no face (already separated, or not "
                             f"neighbours): {shown}")
-    return np.array(out, dtype=np.int64).reshape(-1, 4)
+    return shared[at].reshape(-1, 4)
 
 
 def separate(mesh: Mesh, pairs, inc: Incidence | None = None) -> Split:
@@ -372,6 +379,7 @@ def separate(mesh: Mesh, pairs, inc: Incidence | None = None) -> Split:
     parents = n_sorted[starts[new_runs]]
     split = Split(mesh.n_points, parents, cell[moved], local[moved], target[moved], 0)
     split.faces = _opened(split, pairs, pair_keys)
+    split.incidence = inc                   # of the mesh before: face owners for its groups and loads
     return split
 
 
@@ -400,36 +408,123 @@ def _with_midsides(mesh: Mesh, nodes: np.ndarray, pairs: np.ndarray) -> np.ndarr
     return np.unique(np.concatenate([nodes, np.asarray(extra, dtype=np.int64)]))
 
 
+def _type_tables(mesh):
+    """Per block: (faces containing each local node (k, f), face corners (F, 4)), padded with -1 and
+    stacked over the blocks' types so numba reads them by block index."""
+    els = [_types.get(b.type) for b in mesh.blocks]
+    k = max(el.n_nodes for el in els)
+    nf = max(len(el.faces) for el in els)
+    at = [_faces_at(el) for el in els]
+    width = max(t.shape[1] for t in at)
+    faces_at = np.full((len(els), k, width), -1, dtype=np.int64)
+    corners = np.full((len(els), nf, 4), -1, dtype=np.int64)
+    for i, (el, t) in enumerate(zip(els, at)):
+        faces_at[i, :t.shape[0], :t.shape[1]] = t
+        for f, face in enumerate(el.faces):
+            corners[i, f, :len(face.corners)] = face.corners
+    return faces_at, corners
+
+
+@njit(cache=True)
+def _face_key(nodes, corners, out):
+    """out = the face's global corner ids sorted ascending, -1 padded at the front (so -1 sort first)."""
+    for j in range(4):
+        out[j] = nodes[corners[j]] if corners[j] >= 0 else -1
+    for i in range(1, 4):            # insertion sort of 4
+        v = out[i]
+        j = i - 1
+        while j >= 0 and out[j] > v:
+            out[j + 1] = out[j]
+            j -= 1
+        out[j + 1] = v
+
+
+@njit(cache=True)
+def _is_cut(key, cut_keys):
+    """Binary search of a key (4,) among the lexicographically sorted rows of cut_keys."""
+    lo, hi = 0, cut_keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        less = False
+        equal = True
+        for j in range(4):
+            if cut_keys[mid, j] != key[j]:
+                less = cut_keys[mid, j] < key[j]
+                equal = False
+                break
+        if equal:
+            return True
+        if less:
+            lo = mid + 1
+        else:
+            hi = mid
+    return False
+
+
+@njit(cache=True)
+def _join_pairs(node, block, cell_nodes, local, faces_at, corners, cut_keys):
+    """Pairs of entries (same node, consecutive runs) whose cells share a face holding the node that is
+    not cut.  cell_nodes: (P, k) the entry's cell nodes (-1 padded).  Per node, its faces are sorted by a
+    hash of their corners and equal keys are looked for among equal hashes only."""
+    P, S = node.shape[0], faces_at.shape[2]
+    keys = np.full((P * S, 4), -2, dtype=np.int64)
+    owner = np.empty(P * S, dtype=np.int64)
+    hashes = np.empty(P * S, dtype=np.int64)
+    n = 0
+    for e in range(P):
+        for s in range(S):
+            f = faces_at[block[e], local[e], s]
+            if f >= 0:
+                _face_key(cell_nodes[e], corners[block[e], f], keys[n])
+                owner[n] = e
+                h = np.int64(1469598103934665603)
+                for j in range(4):
+                    h = (h ^ keys[n, j]) * np.int64(1099511628211)       # FNV-1a, wrapping
+                hashes[n] = h
+                n += 1
+    out = np.empty((P * 4, 2), dtype=np.int64)
+    m = 0
+    start = 0
+    while start < n:                  # the rows of one node are consecutive (entries node by node)
+        stop = start
+        while stop < n and node[owner[stop]] == node[owner[start]]:
+            stop += 1
+        order = start + np.argsort(hashes[start:stop], kind="mergesort")
+        i = 0
+        while i < order.size:
+            j = i
+            while j < order.size and hashes[order[j]] == hashes[order[i]]:
+                j += 1
+            for x in range(i, j):
+                for y in range(x + 1, j):
+                    r, q = order[x], order[y]
+                    if (keys[r, 0] == keys[q, 0] and keys[r, 1] == keys[q, 1] and keys[r, 2] == keys[q, 2]
+                            and keys[r, 3] == keys[q, 3] and owner[r] != owner[q] and not _is_cut(keys[r], cut_keys)):
+                        if m == out.shape[0]:
+                            grown = np.empty((2 * m, 2), dtype=np.int64)
+                            grown[:m] = out
+                            out = grown
+                        out[m, 0] = min(owner[r], owner[q])
+                        out[m, 1] = max(owner[r], owner[q])
+                        m += 1
+            i = j
+        start = stop
+    return out[:m]
+
+
 def _joins(mesh, node, cell, local, cut_keys) -> np.ndarray:
     """Edges (e, 2) between incidence entries (same node) whose cells share an uncut face holding it."""
     block, row = _locate(mesh, cell)
-    rows_key, rows_entry = [], []
+    k = max(b.cells.shape[1] for b in mesh.blocks)
+    cell_nodes = np.full((node.size, k), -1, dtype=np.int64)
     for b in np.unique(block):
-        blk, el = mesh.blocks[b], _types.get(mesh.blocks[b].type)
-        at = _faces_at(el)
-        entries = np.flatnonzero(block == b)
-        corners = [list(f.corners) for f in el.faces]
-        for slot in range(at.shape[1]):
-            face = at[local[entries], slot]
-            for fi in np.unique(face[face >= 0]):
-                e = entries[face == fi]
-                k = np.full((e.size, 4), -1, dtype=np.int64)
-                k[:, :len(corners[fi])] = np.sort(blk.cells[row[e]][:, corners[fi]], axis=1)
-                rows_key.append(k)
-                rows_entry.append(e)
-    if not rows_key:
-        return np.zeros((0, 2), np.int64)
-    keys = np.hstack([node[np.concatenate(rows_entry)][:, None], np.vstack(rows_key)])
-    entry = np.concatenate(rows_entry)
-    order = np.lexsort(keys.T[::-1])
-    k, e = keys[order], entry[order]
-    same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
-    # a face shared by two cells joins them at the node unless it is cut
-    if len(same):
-        face_keys = k[same, 1:]
-        is_cut = _rows_in(face_keys, cut_keys)
-        same = same[~is_cut]
-    return np.stack([e[same], e[same + 1]], axis=1)
+        mine = block == b
+        cell_nodes[mine, :mesh.blocks[b].cells.shape[1]] = mesh.blocks[b].cells[row[mine]]
+    faces_at, corners = _type_tables(mesh)
+    # cut keys sorted ascending with the -1 padding first, as _face_key writes them
+    keys = np.sort(np.where(cut_keys >= 0, cut_keys, -1), axis=1)
+    keys = keys[np.lexsort(keys.T[::-1])]
+    return _join_pairs(node, block, cell_nodes, local, faces_at, corners, np.ascontiguousarray(keys))
 
 
 def _rows_in(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -74,6 +74,7 @@ class TopologyEvents:
         self.events = list(events)
         self.tol = box_tolerance(model.mesh.points)
         self.records: list = []
+        self.last_count = 0
         self.actions: list = []
         if not self.events:
             return
@@ -83,6 +84,9 @@ class TopologyEvents:
             raise TopologyError(f"{self.events[0].kind}: {exc}") from None
         self._plan(model)
         self._rehearse(model.mesh)
+        if any(e.kind == "cut" for e in self.events):
+            from .pattern import SparsePattern
+            SparsePattern.warm_up_growth()
 
     # -- setup ----------------------------------------------------------------------------------
     def _plan(self, model) -> None:
@@ -200,7 +204,8 @@ class TopologyEvents:
         before = len(self.records)
         for n in self.due(step):
             model, u, v = self._apply_one(model, n, step, t, u, v)
-        return None if len(self.records) == before else (model, u, v)
+        self.last_count = len(self.records) - before          # records of this call
+        return None if self.last_count == 0 else (model, u, v)
 
     def _apply_one(self, model, n, step, t, u, v):
         action = self.actions[n]

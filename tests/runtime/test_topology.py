@@ -361,3 +361,50 @@ def test_tearing_rules_are_checked():
                                           'criterion = "stretch"'))
     with pytest.raises(tm.TensormassError, match=r"cut\[0\].step: a tearing rule"):
         tm.Scene.from_string(SLAB.replace("step = 2\nplane", 'criterion = "stretch"\nthreshold = 0.3\nstep = 2\nplane'))
+
+
+def test_the_assembly_colouring_survives_a_cut():
+    """A cut gives new nodes only to cells that shared the parent: segments of one colour still share
+    no node, so the assembler of the cut model reuses the old colouring and assembles the same K."""
+    model = _model(SCENE.format(element="tetra", quad="gauss1").replace("cells = [12, 2, 2]", "cells = [24, 6, 6]"))
+    old = Assembler(model)
+    split = T.separate(model.mesh, T.plane_pairs(model.mesh, [0.0, 0.1, 0], [0, 1, 0]))
+    new = cutting.separated(model, split)
+    reused, fresh = Assembler(new, colours=old.colours()), Assembler(new)
+    for plan, before in zip(reused.plans, old.plans):
+        assert plan.order is before.order and plan.n_segments > 1
+        for c in range(len(plan.starts) - 1):
+            seen = np.zeros(new.n_points, dtype=int)
+            for g in plan.order[plan.starts[c]:plan.starts[c + 1]]:
+                nodes = np.unique(plan.cells[g * plan.segment:(g + 1) * plan.segment])
+                seen[nodes] += 1
+            assert seen.max() <= 1
+    u = np.random.default_rng(3).normal(scale=1e-3, size=new.n_dofs)
+    f1, K1 = reused.forces_and_stiffness(u)
+    f2, K2 = fresh.forces_and_stiffness(u)
+    assert np.allclose(f1, f2, rtol=1e-12, atol=1e-9) and np.allclose(K1, K2, rtol=1e-12, atol=1e-6)
+
+
+@pytest.mark.parametrize("element, quad", [("tetra", "gauss1"), ("hexahedron", "gauss2"), ("tetra10", "gauss2")])
+def test_the_pattern_grows_by_the_new_nodes_only(element, quad):
+    """The cut model's pattern grown from the old one (new nodes' couplings appended, the ended ones
+    kept as explicit zeros) holds the same matrix as a pattern built afresh, and contains it."""
+    model = _model(SCENE.format(element=element, quad=quad))
+    old = Assembler(model)
+    split = T.separate(model.mesh, T.plane_pairs(model.mesh, [0.0, 0.1, 0], [0, 1, 0]))
+    new = cutting.separated(model, split)
+    grown, fresh = Assembler(new, grow_from=old.pattern), Assembler(new)
+    assert grown.pattern is not fresh.pattern and grown.pattern.nnz >= fresh.pattern.nnz
+    old_rows = np.diff(old.pattern.node_indptr)
+    assert np.all(np.diff(grown.pattern.node_indptr)[:model.n_points] >= old_rows)
+    u = np.random.default_rng(4).normal(scale=1e-3, size=new.n_dofs)
+    f1, K1 = grown.forces_and_stiffness(u)
+    f2, K2 = fresh.forces_and_stiffness(u)
+    A1, A2 = grown.matrix(K1), fresh.matrix(K2)
+    assert np.allclose(f1, f2, rtol=1e-12, atol=1e-9)
+    assert abs(A1 - A2).max() <= 1e-9 * abs(A2).max()
+    # fresh's structure is inside grown's
+    S1, S2 = A1.copy(), A2.copy()
+    S1.data[:] = 1.0
+    S2.data[:] = 1.0
+    assert (S2 - S2.multiply(S1)).nnz == 0
