@@ -71,6 +71,12 @@ Schema (every table but [mesh] and [[material]] is optional)::
     fields = ["von_mises", "cauchy_stress", "det_F_min"]   # the default; [] for none (runtime.fields.FIELDS)
     picture = "von_mises"                   # or true / any field / "displacement": <dir>/<field>.png at the end
     plot = true                             # the per-step history as <dir>/summary.png (runtime.curves)
+    [[cut]]                                 # open the body along a plane during the run (runtime.topology)
+    time = 0.2                              # or step = k; plane = [[point...], [normal...]], box = ... limits it;
+    plane = [[0.1, 0, 0], [1, 0, 0]]        # sweep = [...] + duration = T: a blade; or criterion = "stretch"
+    [[remove]]                              # and threshold = 0.35: tearing.  remove: the cells whose rest
+    step = 5                                # centroid is in the box (and/or region)
+    box = [[...], [...]]
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.
