@@ -197,6 +197,9 @@ def _topology_rows(events) -> list:
         if e.get("kind") == "cut":
             what = (f"{e.get('faces')} face(s) opened, +{e.get('nodes_added')} node(s), "
                     f"{e.get('cells_changed')} cell(s) renumbered")
+        elif e.get("kind") == "refine":
+            what = (f"{e.get('cells_refined')} hexahedra split 1:8, +{e.get('nodes_added')} node(s), "
+                    f"{e.get('hanging_nodes')} hanging (constrained)")
         else:
             what = f"{e.get('cells_removed')} cell(s) removed, {e.get('nodes_orphaned')} node(s) left without a cell"
         seconds = (e.get("seconds") or {}).get("total")

@@ -51,7 +51,8 @@ def check_model(model) -> None:
         raise TopologyError("cut/remove: locking-free formulations (material formulation) cannot be combined "
                             "with topology changes yet; use formulation = \"displacement\"")
     if model.adapt:
-        raise TopologyError("cut/remove: [[adapt]] rules cannot be combined with [[cut]] / [[remove]] events yet")
+        raise TopologyError("cut/remove: [[adapt]] rules cannot be combined with [[cut]] / [[remove]] / [[refine]] "
+                            "events yet")
 
 
 def _flat(model, cell_type) -> bool:

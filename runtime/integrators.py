@@ -47,7 +47,8 @@ class Context:
         # multigrid's near-nullspace, only where a solver may use multigrid
         modes = (rigid_body_modes(model.mesh.points, np.arange(model.n_dofs), model.dofs_per_node)
                  if s.linear in ("auto", "amg") else None)
-        self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs, modes)
+        self.hanging = getattr(model, "hanging", None)
+        self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs, modes, self.hanging)
         self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
         if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
             # follower pressure on an open surface: non-symmetric Newton matrices (runtime/pressure.py)
@@ -69,6 +70,10 @@ class Context:
         x, its = self.system.solve(self.linear, data, b, x_c, x0)
         self.linear_iterations += its
         return x
+
+    def reduce(self, g: np.ndarray) -> np.ndarray:
+        """A gradient or residual onto the constrained dofs (hanging nodes: P^T g; else g itself)."""
+        return g if self.hanging is None else self.hanging.reduce(g)
 
     def add_diagonal(self, data, diag):
         out = data.copy()
@@ -129,7 +134,10 @@ class _Potential:
     def gradient(self, u):
         _, dq, _ = self.extra(u)
         g = dq - self.asm.forces(u) - self.f_ext
-        return g if self.pressure is None else g - self.factor * self.pressure.forces(u)
+        g = g if self.pressure is None else g - self.factor * self.pressure.forces(u)
+        # hanging nodes (runtime.hanging): the gradient of the constrained problem, P^T g
+        hanging = getattr(self.asm.model, "hanging", None)
+        return g if hanging is None else hanging.reduce(g)
 
     def force_scale(self, u):
         """Forces that set the convergence tolerance: the external load (plus inertia, below)."""
@@ -387,7 +395,7 @@ class ImplicitEuler(_Dynamic):
         v1 = v + dv
         u1 = u + h * v1
         # the step's equation, A dv / h - (f - h K v) = 0, on every dof: its fixed rows are the reactions
-        ctx.residual = (u1, ctx.asm.matrix(A) @ dv / h - (f - h * Kv))
+        ctx.residual = (u1, ctx.reduce(ctx.asm.matrix(A) @ dv / h - (f - h * Kv)))
         return u1, v1
 
 

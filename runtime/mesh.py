@@ -123,6 +123,9 @@ class Mesh:
     points: np.ndarray
     blocks: list[CellBlock] = field(default_factory=list)
     groups: list = field(default_factory=list)          # runtime.mesh_groups.Group: named regions of the file
+    # nodes created by refinement at edge midpoints / face centres: rows (node, 2 or 4 parents, -1
+    # padded); runtime.hanging finds those that hang on an unrefined neighbour.  None: no such node
+    midpoints: np.ndarray | None = None
 
     def __post_init__(self):
         pts = np.asarray(self.points, dtype=np.float64)

@@ -213,7 +213,10 @@ class Model:
         self.mass = self._lumped_mass()
         self.mass_matrix = self._mass_matrix      # runtime.mass.MassMatrix (solver.mass)
         self.fixed_dofs, self.prescribed = self._constraints(list(fixed))
-        self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), self.fixed_dofs)
+        # hanging nodes of a locally refined hexahedral mesh (runtime.hanging): neither free nor fixed
+        self.hanging = self._hanging_nodes()
+        unknown = self.fixed_dofs if self.hanging is None else np.union1d(self.fixed_dofs, self.hanging.slave_dofs)
+        self.free_dofs = np.setdiff1d(np.arange(self.n_dofs), unknown)
         self.f_ext = self._external_forces()
         self.pressure = self._pressure_loads()    # runtime.pressure.FollowerPressure or None
         self.volume_constraint = self._volume_constraint()   # (VolumeConstraint, free node mask) or None
@@ -237,11 +240,12 @@ class Model:
         model.scene = scene
         return model
 
-    def rebuilt(self, mesh: Mesh) -> "Model":
-        """The same scene on another mesh (after refinement): parts, masses, constraints and loads anew."""
+    def rebuilt(self, mesh: Mesh, check: bool = True) -> "Model":
+        """The same scene on another mesh (after refinement): parts, masses, constraints and loads anew.
+        check=False: the mesh is known valid (a 1:8 refinement's hanging nodes, which check_mesh refuses)."""
         fixed, probes = self._specs
         model = Model(mesh, self.materials, fixed, self.loads, probes, self.solver, self.output, self.name,
-                      adapt=self.adapt, max_memory=self.max_memory, amplitudes=self.amplitudes)
+                      adapt=self.adapt, max_memory=self.max_memory, amplitudes=self.amplitudes, check=check)
         model.scene = self.scene
         return model
 
@@ -404,6 +408,20 @@ class Model:
         target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
         dofs = np.flatnonzero(~np.isnan(target))
         return dofs, target[dofs]
+
+    def _hanging_nodes(self):
+        """The hanging-node constraints of a refined mesh (runtime.hanging), or None."""
+        if getattr(self.mesh, "midpoints", None) is None:
+            return None
+        from .hanging import HangingNodes
+        hanging = HangingNodes.of(self.mesh, self.dofs_per_node, self.fixed_dofs)
+        if hanging is not None and self.solver.kind in ("explicit", "generalized_alpha"):
+            raise TensormassError(f"solver.kind = {self.solver.kind!r}: a mesh with hanging nodes (hexahedra "
+                                  "refined 1:8 next to whole ones) needs implicit_euler, backward_euler or static "
+                                  "(its mass is not diagonal on the constrained dofs)")
+        if hanging is not None and getattr(self, "couplings", None):
+            raise TensormassError("hanging nodes cannot be combined with a locking-free formulation yet")
+        return hanging
 
     def _external_forces(self) -> np.ndarray:
         """Consistent loads (runtime.loads): gravity f_a = int N_a rho g dV, tractions int N_a t dA."""

@@ -77,6 +77,9 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [[remove]]                              # and threshold = 0.35: tearing.  remove: the cells whose rest
     step = 5                                # centroid is in the box (and/or region)
     box = [[...], [...]]
+    [[refine]]                              # split the hexahedra whose rest centroid is in the box 1:8
+    time = 0.1                              # (or step = k); hanging nodes are constrained
+    box = [[...], [...]]
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.
@@ -256,8 +259,10 @@ class TopologyEvent:
     (criterion = "stretch"): after every `every` steps, the interior faces (inside `box`) across
     which the body is stretched by more than 1 + threshold open.
     remove: the cells whose rest centroid lies in `box` (and/or in the mesh group `region`).
+    refine: the hexahedra whose rest centroid lies in `box` are split 1:8 (runtime.hanging constrains
+    the nodes that hang on their whole neighbours).
     """
-    kind: str                             # cut | remove
+    kind: str                             # cut | remove | refine
     time: float | None = None             # dynamic runs: after the first step ending at or past it
     step: int | None = None               # or after this step (any solver)
     point: tuple | None = None            # cut: a point of the plane
@@ -379,10 +384,11 @@ def _event_step(time: float, solver) -> int:
     return max(1, math.ceil(time / float(solver.dt) - 1e-9))
 
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
-        "amplitude", "cut", "remove")
+        "amplitude", "cut", "remove", "refine")
 _CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every", "sweep", "duration")
 TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
+_REFINE = ("time", "step", "box", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
 _MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
@@ -573,7 +579,10 @@ class _Parser:
             raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
                              "(without constraints the stiffness matrix is singular)")
         topology = [self.topology_event(t, kind, f"{kind}[{i}]", solver)
-                    for kind in ("cut", "remove") for i, t in enumerate(self.tables(data.get(kind, []), kind))]
+                    for kind in ("cut", "remove", "refine") for i, t in enumerate(self.tables(data.get(kind, []), kind))]
+        kinds = {e.kind for e in topology}
+        if "refine" in kinds and kinds & {"cut", "remove"}:
+            raise SceneError("refine: [[refine]] events cannot be combined with [[cut]] / [[remove]] yet")
         # in the order they happen (a cut and a removal at the same step: the file's order, cuts first)
         topology.sort(key=lambda e: e.step if e.step is not None else
                       _event_step(e.time, solver) if e.time is not None else 0)
@@ -953,7 +962,7 @@ class _Parser:
 
     def topology_event(self, t, kind, key, solver) -> TopologyEvent:
         t = self.table(t, key)
-        self.keys(t, key, _CUT if kind == "cut" else _REMOVE)
+        self.keys(t, key, {"cut": _CUT, "remove": _REMOVE, "refine": _REFINE}[kind])
         if "criterion" in t:
             return self.tearing(t, key)
         if ("time" in t) == ("step" in t):
@@ -995,6 +1004,10 @@ class _Parser:
                 event.duration = self.number(t["duration"], f"{key}.duration", positive=True)
                 if _event_step(event.time + event.duration, solver) > solver.steps:
                     raise SceneError(f"{key}.duration: the blade's path ends after the run's end")
+        elif kind == "refine":
+            if event.box is None:
+                raise SceneError(f"{key}.box: missing (the hexahedra to split 1:8: those whose rest centroid is "
+                                 "inside box = [[...], [...]])")
         else:
             if "region" in t:
                 event.region = self.region(t["region"], f"{key}.region")

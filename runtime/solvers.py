@@ -534,8 +534,12 @@ class ConstrainedSystem:
     index maps computed once: A_ff x_f = b_f - A_fc x_c.
     """
 
-    def __init__(self, pattern, free: np.ndarray, fixed: np.ndarray, modes: np.ndarray | None = None):
+    def __init__(self, pattern, free: np.ndarray, fixed: np.ndarray, modes: np.ndarray | None = None,
+                 hanging=None):
+        """hanging: runtime.hanging.HangingNodes, or None: the system solved is then P^T A P over the
+        free dofs (slaves are neither free nor fixed) and the solution is expanded, x = P x."""
         self.pattern, self.free, self.fixed = pattern, free, fixed
+        self.hanging = hanging
         # rigid-body modes of the free dofs (multigrid's near-nullspace), or None
         self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
@@ -558,6 +562,8 @@ class ConstrainedSystem:
 
     def solve(self, solver: LinearSolver, data: np.ndarray, b: np.ndarray, x_c=None, x0=None):
         """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations)."""
+        if self.hanging is not None:
+            return self._solve_constrained(solver, data, b, x_c, x0)
         x = np.zeros(self.pattern.n_dofs)
         rhs = b[self.free]
         if x_c is not None and self.fixed.size and np.any(x_c):
@@ -567,3 +573,19 @@ class ConstrainedSystem:
         solver.near_nullspace = self.modes
         x[self.free], its = solver.solve(self._block(data, self.ff), rhs, guess)
         return x, its
+
+    def _solve_constrained(self, solver, data, b, x_c, x0):
+        """The hanging-node constrained system: P^T A P, P^T b on the free dofs, then x = P x."""
+        h = self.hanging
+        A = h.reduce_matrix(self.pattern.matrix(data))
+        b = h.reduce(np.asarray(b, dtype=float))
+        x = np.zeros(self.pattern.n_dofs)
+        A_f = A[self.free]
+        rhs = b[self.free]
+        if x_c is not None and self.fixed.size and np.any(x_c):
+            x[self.fixed] = x_c
+            rhs = rhs - A_f[:, self.fixed] @ x_c
+        guess = None if x0 is None else x0[self.free]
+        solver.near_nullspace = self.modes
+        x[self.free], its = solver.solve(A_f[:, self.free].tocsr(), rhs, guess)
+        return h.expand(x), its

@@ -266,7 +266,7 @@ class Split:
             cells = blk.cells.copy()
             cells[row[mine], self.local[mine]] = self.node[mine]
             blocks.append(CellBlock(blk.type, cells, blk.tags))
-        return Mesh(points, blocks, self._groups(mesh))
+        return Mesh(points, blocks, self._groups(mesh), mesh.midpoints)
 
     def _groups(self, mesh: Mesh) -> list:
         """Mesh groups: their faces (surface groups) follow the cells that own them."""
@@ -558,7 +558,7 @@ class Removal:
                 blocks.append(blk)
             elif keep.any():
                 blocks.append(CellBlock(blk.type, blk.cells[keep], None if blk.tags is None else blk.tags[keep]))
-        return Mesh(mesh.points, blocks, self._groups(mesh))
+        return Mesh(mesh.points, blocks, self._groups(mesh), mesh.midpoints)
 
     def _groups(self, mesh: Mesh) -> list:
         """Mesh groups: cell ids renumbered (removed ones dropped), faces of removed cells dropped."""
@@ -613,3 +613,109 @@ def check_topology(mesh: Mesh) -> None:
     _check_structure(mesh)
     if _solid_blocks(mesh):
         _check_shared_faces(mesh, _face_table(mesh))
+
+
+# --------------------------------------------------------------------------- hexahedral refinement
+
+# The 3 x 3 x 3 lattice of a hexahedron split 1:8: lattice point (i, j, k) in {0, 1, 2}^3 sits at
+# reference coordinates (i - 1, j - 1, k - 1); VTK corner c of the hexahedron at _CORNER[c].
+_CORNER = np.array([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0), (0, 0, 2), (2, 0, 2), (2, 2, 2), (0, 2, 2)])
+_CHILD = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)])
+
+
+def _lattice_parents() -> list:
+    """For each of the 27 lattice points: the corners (local ids) whose mean it is."""
+    out = []
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                p = np.array([i, j, k])
+                # the corners sharing the point's coordinates where those are 0 or 2
+                fixed = p != 1
+                out.append(tuple(c for c in range(8) if np.all(_CORNER[c][fixed] == p[fixed])))
+    return out
+
+
+_PARENTS = _lattice_parents()
+
+
+@dataclass
+class HexRefinement:
+    """Hexahedra split 1:8: `apply` gives the refined mesh; `weights` interpolates nodal values."""
+    mesh: Mesh
+    parents: list                # per new node, its parent nodes (2, 4 or 8): its value is their mean
+    refined: np.ndarray          # global ids (before) of the split hexahedra
+    new_ids: np.ndarray          # (n_cells before,) id of each old cell afterwards (the first child for split ones)
+
+    def interpolate(self, values: np.ndarray, n_old: int) -> np.ndarray:
+        """Nodal values (n_old, ...) extended to the new nodes (the mean of their parents: exact for the
+        trilinear field of the split hexahedra)."""
+        values = np.asarray(values)
+        out = np.empty((n_old + len(self.parents),) + values.shape[1:], dtype=np.result_type(values, float))
+        out[:n_old] = values
+        for i, p in enumerate(self.parents):
+            out[n_old + i] = values[list(p)].mean(axis=0)
+        return out
+
+
+def refine_hexahedra(mesh: Mesh, cell_ids) -> HexRefinement:
+    """Split the given hexahedra 1:8 (edge midpoints, face centres, the centre), sharing the new
+    nodes between neighbours that are both split; neighbours left whole get hanging nodes, which
+    Mesh.midpoints records (runtime.hanging constrains them).  The children of a hexahedron take its
+    block: the first replaces it, the others follow the block's cells."""
+    ids = np.unique(np.asarray(cell_ids, dtype=np.int64))
+    if not ids.size:
+        raise TopologyError("refine: no cell selected")
+    if mesh.groups:
+        raise TopologyError("refine: meshes with named groups (a gmsh file's physical groups) cannot be "
+                            "refined here yet")
+    block, row = _locate(mesh, ids)
+    bad = sorted({mesh.blocks[b].type for b in block if mesh.blocks[b].type != "hexahedron"})
+    if bad:
+        raise TopologyError(f"refine: only hexahedra are split 1:8 here (triangles and tetrahedra refine by "
+                            f"bisection: [[adapt]] action = \"refine\"); selected: {', '.join(bad)}")
+    points = [mesh.points]
+    n = mesh.n_points
+    created: dict = {}
+    parents_of_new: list = []
+    midpoints = [] if mesh.midpoints is None else [np.asarray(mesh.midpoints, dtype=np.int64)]
+
+    def node_for(corners: tuple):
+        nonlocal n
+        key = tuple(sorted(corners))
+        if key not in created:
+            created[key] = n
+            parents_of_new.append(key)
+            points.append(mesh.points[list(key)].mean(axis=0)[None])
+            if len(key) in (2, 4):
+                midpoints.append(np.array([[n, *key, *([-1] * (4 - len(key)))]], dtype=np.int64))
+            n += 1
+        return created[key]
+
+    children = {}
+    for b, r in zip(block, row):
+        corners = mesh.blocks[b].cells[r]
+        lattice = np.empty((3, 3, 3), dtype=np.int64)
+        for idx, parents in enumerate(_PARENTS):
+            i, j, k = idx // 9, (idx // 3) % 3, idx % 3
+            lattice[i, j, k] = corners[parents[0]] if len(parents) == 1 else node_for(tuple(corners[list(parents)]))
+        kids = [[lattice[tuple(c + d)] for d in _CORNER // 2] for c in _CHILD]
+        children.setdefault(b, []).append((r, np.array(kids, dtype=np.int64)))
+    blocks, new_ids = [], []
+    for b, blk in enumerate(mesh.blocks):
+        cells = blk.cells
+        if b in children:
+            cells = cells.copy()
+            extra = []
+            for r, kids in children[b]:
+                cells[r] = kids[0]
+                extra.append(kids[1:])
+            cells = np.vstack([cells] + extra)
+            tags = None if blk.tags is None else np.concatenate(
+                [blk.tags] + [np.full(7, blk.tags[r]) for r, _ in children[b]])
+            blocks.append(CellBlock(blk.type, cells, tags))
+        else:
+            blocks.append(blk)
+        new_ids.append(sum(len(x) for x in blocks[:-1]) + np.arange(len(blk)))
+    refined_mesh = Mesh(np.vstack(points), blocks, [], np.vstack(midpoints) if midpoints else None)
+    return HexRefinement(refined_mesh, parents_of_new, ids, np.concatenate(new_ids))

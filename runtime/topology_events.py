@@ -19,8 +19,8 @@ import numpy as np
 
 from .cutting import check_model, removed, separated
 from .regions import box_tolerance, region_cell_masks
-from .topology import (TopologyError, _cell_nodes, box_cells, check_topology, incidence, plane_pairs, removal,
-                       separate)
+from .topology import (TopologyError, _cell_nodes, box_cells, check_topology, incidence, plane_pairs,
+                       refine_hexahedra, removal, separate)
 
 __all__ = ["TopologyEvents", "tearing_pairs", "blade_fractions", "pieces"]
 
@@ -92,11 +92,14 @@ class TopologyEvents:
     def _plan(self, model) -> None:
         mesh, solver = model.mesh, model.solver
         for i, e in enumerate(self.events):
+            if e.kind == "refine" and solver.kind in ("explicit", "generalized_alpha"):
+                raise TopologyError(f"{_key(e, i)}: splitting hexahedra leaves hanging nodes, which need "
+                                    f"solver.kind implicit_euler, backward_euler or static (not {solver.kind!r})")
             if e.criterion is not None:
                 if e.box is not None and not box_cells(mesh, e.box, self.tol).size:
                     raise TopologyError(f"{_key(e, i)}.box: no cell has its centroid inside it")
                 self.actions.append(_Action(None, i))
-            elif e.kind == "remove":
+            elif e.kind in ("remove", "refine"):
                 self.actions.append(_Action(_step(e, solver), i))
             elif e.sweep is None:
                 self.actions.append(_Action(_step(e, solver), i, self._plane_pairs(mesh, i, e.box)))
@@ -161,6 +164,8 @@ class TopologyEvents:
                     if split is not None:
                         opened.add(action.event)
                         mesh = split.apply(mesh)
+                elif e.kind == "refine":
+                    mesh = refine_hexahedra(mesh, self._select_cells(mesh, action.event)).mesh
                 else:
                     gone = removal(mesh, self._select_cells(mesh, action.event))
                     self._renumber(n, gone)
@@ -227,6 +232,17 @@ class TopologyEvents:
             u = np.vstack([U, U[split.parents]]).ravel()
             v = np.vstack([V, V[split.parents]]).ravel()
             counts = {"faces": split.faces, "nodes_added": split.n_new, "cells_changed": int(split.changed_cells.size)}
+        elif e.kind == "refine":
+            refinement = refine_hexahedra(model.mesh, self._select_cells(model.mesh, i))
+            topo = time.perf_counter()
+            # a refinement changes constants, masses and the pattern of its cells: the model is built
+            # anew on the refined mesh (check_mesh would refuse its hanging nodes: runtime.hanging)
+            new = model.rebuilt(refinement.mesh, check=False)
+            check_topology(new.mesh)
+            u = refinement.interpolate(u.reshape(-1, dpn), model.n_points).ravel()
+            v = refinement.interpolate(v.reshape(-1, dpn), model.n_points).ravel()
+            counts = {"cells_refined": int(refinement.refined.size), "nodes_added": len(refinement.parents),
+                      "hanging_nodes": 0 if new.hanging is None else int(new.hanging.slaves.size)}
         else:
             gone = removal(model.mesh, self._select_cells(model.mesh, i), incidence(model.mesh))
             self._renumber(n, gone)
