@@ -515,7 +515,7 @@ class Simulation:
         return Summary(
             name=model.name, solver=model.solver.kind, steps=n_steps,
             n_dofs=model.n_dofs, n_free_dofs=int(model.free_dofs.size),
-            n_elements=model.n_elements, kernels=model.kernel_info(),
+            n_elements=model.n_elements, kernels=self._kernel_info(),
             time={"setup": setup, "first_step": h.first_wall or 0.0,
                   "assembly": ctx.asm.time, "linear_solve": ctx.linear.time,
                   "health": self.monitor.time, "total": setup + h.wall_total},
@@ -530,6 +530,16 @@ class Simulation:
             estimate=_estimate(model), probe_points=model.probe_info(),
             fields=self._fields_summary(), reactions=self._final_reactions(),
             units=_units(model.dim, model.solver.kind == "static"), advice=list(getattr(self, "advice", [])))
+
+    def _kernel_info(self) -> list:
+        """Model.kernel_info with, per part, the colour count of its assembly: segments of one colour
+        share no node and run on the threads at once (runtime.assembly)."""
+        info = self.model.kernel_info()
+        plans = getattr(getattr(self.ctx, "asm", None), "plans", None) or []
+        for row, plan in zip(info, plans):
+            row["colours"] = int(len(plan.starts) - 1)
+            row["segments"] = int(plan.n_segments)
+        return info
 
     def _final_reactions(self) -> dict:
         """{name: {"force", "moment", "point"}} at the last state (lists), {} before any step."""
