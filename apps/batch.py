@@ -153,14 +153,9 @@ def plan_tasks(scenes, vary) -> list:
 
 def load_scene(path, values, load_mesh=True, max_memory=None):
     """The scene of one task: the file's TOML with the variation written in, validated."""
-    from ..runtime.scene import Scene
+    from ..runtime.scene import Scene, read_scene_file
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError(f"scene file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"cannot read scene file {path}: {exc}") from None
+    text = read_scene_file(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -303,12 +303,7 @@ class Scene:
         estimate is above it.  None: $TENSORMASS_MAX_MEMORY, else most of the available memory.
         """
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise SceneError(f"scene file not found: {path}") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise SceneError(f"cannot read scene file {path}: {exc}") from None
+        text = read_scene_file(path)
         scene = cls.from_string(text, base_dir=path.parent, name=path.stem, source=str(path),
                                 load_mesh=load_mesh, max_memory=max_memory)
         return scene
@@ -374,6 +369,17 @@ class Scene:
     def to_dict(self) -> dict:
         """Plain data (for summaries); not guaranteed to round-trip through from_dict."""
         return asdict(self)
+
+
+def read_scene_file(path) -> str:
+    """The text of a scene file; SceneError naming the file when it cannot be read."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"scene file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"cannot read scene file {path}: {exc}") from None
 
 
 # ============================================================================== parsing
