@@ -1,7 +1,8 @@
 """What running a report's sweep on dask workers buys: `report accuracy` on 1 worker (this process,
 one case after the other) against N worker processes (a LocalCluster, one thread each), same run.
 
-    python -m tensormass.apps.bench_batch [--workers 2] [--benchmark cantilever cook volume] [--json F]
+    tensormass bench batch [--workers 2] [--benchmark cantilever cook volume] [--json F]
+    python -m tensormass.apps.bench_batch ...          (the same)
 
 Both runs follow a warm-up (the --quick sweep, so numba and C caches are filled and neither run pays
 for compilation); the parallel time includes starting the cluster. The results.csv of both runs must
@@ -44,13 +45,28 @@ def run(workers: int, benchmarks, quick: bool) -> dict:
             "speedup": times[1] / times[workers], "identical_results": same}
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tensormass.apps.bench_batch", description=__doc__.split("\n\n")[0])
+def _arguments(p) -> None:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--benchmark", nargs="+", default=["cantilever", "cook", "volume"])
     p.add_argument("--quick", action="store_true", help="the reports' --quick sweeps (a smoke test)")
     p.add_argument("--json", help="write the numbers here")
-    args = p.parse_args(argv)
+
+
+def add_batch_command(bench_subparsers) -> None:
+    """`tensormass bench batch`: the same as `python -m tensormass.apps.bench_batch`."""
+    p = bench_subparsers.add_parser("batch", help="report accuracy's sweep on N dask workers against 1, "
+                                    "results compared (needs tensormass[distributed])")
+    _arguments(p)
+    p.set_defaults(run=cmd_batch)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tensormass.apps.bench_batch", description=__doc__.split("\n\n")[0])
+    _arguments(p)
+    return cmd_batch(p.parse_args(argv))
+
+
+def cmd_batch(args) -> int:
     res = run(args.workers, args.benchmark, args.quick)
     parallel = res[f"seconds_{res['workers']}_workers"]
     print(f"report accuracy --benchmark {' '.join(res['benchmarks'])}{' --quick' if res['quick'] else ''} "

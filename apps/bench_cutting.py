@@ -53,7 +53,6 @@ gravity = [0.0, 0.0, -9.81]
 kind = "implicit_euler"
 dt = 0.01
 steps = {STEPS}
-health_monitor = false
 [[cut]]
 step = {CUT_STEP}
 {cut}

@@ -1,0 +1,21 @@
+"""`tensormass bench cutting --quick`: a cut is applied and timed, the baseline rebuild too, the JSON is sane."""
+from __future__ import annotations
+
+import json
+
+from tensormass.apps.bench_cutting import CUT_STEP, STEPS, run_cutting_bench
+
+
+def test_quick_bench_times_the_cut_against_a_full_rebuild(tmp_path):
+    lines = []
+    path = tmp_path / "cutting.json"
+    run_cutting_bench(quick=True, json_path=path, progress=lines.append)
+    report = json.loads(path.read_text())
+    (row,) = report["rows"].values()
+    assert row["status"] == "ok" and row["faces"] > 0 and row["nodes_added"] > 0
+    cut = row["cut_ms"]
+    assert set(cut) == {"topology", "model", "solver", "total"} and all(v > 0 for v in cut.values())
+    assert abs(cut["total"] - (cut["topology"] + cut["model"] + cut["solver"])) < 1e-6
+    assert row["full_rebuild_ms"] > 0 and row["ratio_to_full_rebuild"] > 0
+    assert row["step_ms_before"] > 0 and row["step_ms_after"] > 0 and 1 < CUT_STEP < STEPS
+    assert report["target_ms"] == 50.0 and any("full rebuild" in line for line in lines)
