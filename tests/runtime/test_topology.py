@@ -536,3 +536,15 @@ def test_refinement_is_refused_where_it_cannot_apply():
         _run(explicit)
     with pytest.raises(tm.TensormassError, match="cannot be combined with"):
         tm.Scene.from_string(PATCH + "[[cut]]\nstep = 1\nplane = [[0.6, 0, 0], [1, 0, 0]]\n")
+
+
+def test_every_cutting_example_sets_up():
+    """The shipped examples load, and their events rehearse on the rest mesh (what a run does first)."""
+    from pathlib import Path
+    folder = Path(__file__).parents[2] / "examples" / "cutting"
+    names = []
+    for path in sorted(folder.glob("*.toml")):
+        sim = tm.Simulation(tm.Scene.from_toml(path), output=False)
+        assert sim.topology is not None and sim.topology.actions, path.name
+        names.append(path.stem)
+    assert names == ["beam_cut", "beam_refine", "organ_resection", "slab_incision", "slab_tearing"]
