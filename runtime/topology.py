@@ -4,6 +4,7 @@
     split = separate(mesh, pairs)                       # unsew them: nodes duplicated, cells renumbered
     mesh2 = split.apply(mesh)                           # the new mesh (the old one is left untouched)
     gone = removal(mesh, cell_ids)                      # removing cells (ablation, resection)
+    ref = refine_hexahedra(mesh, cell_ids)              # hexahedra split 1:8 (hanging nodes: runtime.hanging)
 
 The data structure is the mesh itself (point and cell arrays, VTK node order) plus a node -> cell
 incidence built on demand in linear time (`incidence`).  We considered a combinatorial map
@@ -25,6 +26,10 @@ do not change either (the rest geometry of every cell is the same).
 
 Removal takes cells out of the mesh; the cells after them shift down (`Removal.new_ids`).
 Nodes no cell uses any more stay in the point array (the solver pins them).
+
+Refinement splits hexahedra 1:8 at their edge midpoints, face centres and centre (a 3 x 3 x 3
+lattice per hexahedron, shared with split neighbours); the created nodes and their parents are
+recorded in Mesh.midpoints, from which runtime.hanging finds the ones that hang on whole neighbours.
 """
 from __future__ import annotations
 
@@ -40,7 +45,7 @@ from .errors import TensormassError
 from .mesh import CellBlock, Mesh
 
 __all__ = ["TopologyError", "Incidence", "incidence", "face_owners", "plane_pairs", "box_cells", "separate", "Split",
-           "removal", "Removal", "check_topology"]
+           "removal", "Removal", "check_topology", "refine_hexahedra", "HexRefinement"]
 
 
 class TopologyError(TensormassError):
