@@ -83,7 +83,7 @@ class TopologyEvents:
         except TopologyError as exc:
             raise TopologyError(f"{self.events[0].kind}: {exc}") from None
         self._plan(model)
-        self._rehearse(model.mesh)
+        self._rehearse(model.mesh, {name: (p.cell, p.nodes) for name, p in model.probes.items()})
         if any(e.kind == "cut" for e in self.events):
             from .pattern import SparsePattern
             SparsePattern.warm_up_growth()
@@ -151,8 +151,10 @@ class TopologyEvents:
                                                      else "no cell of the region inside the box"))
         return cells
 
-    def _rehearse(self, mesh) -> None:
-        """Apply the timed actions to the rest mesh in order: refuse what would fail during the run."""
+    def _rehearse(self, mesh, probes=None) -> None:
+        """Apply the timed actions to the rest mesh in order: refuse what would fail during the run,
+        and a removal that takes away what a probe reads (it would report zeros from then on)."""
+        probes = dict(probes or {})
         opened = set()
         for n, action in enumerate(self.actions):
             if action.step is None:
@@ -169,6 +171,7 @@ class TopologyEvents:
                 else:
                     gone = removal(mesh, self._select_cells(mesh, action.event))
                     self._renumber(n, gone)
+                    probes = _probes_after(probes, gone)
                     mesh = gone.apply(mesh)
             except TopologyError as exc:
                 message = str(exc).split(": ", 1)[-1] if str(exc).startswith(("cut:", "remove:")) else str(exc)
@@ -263,6 +266,23 @@ class TopologyEvents:
 
     def summary(self) -> list:
         return list(self.records)
+
+
+def _probes_after(probes: dict, gone) -> dict:
+    """Probes' (cell, nodes) after a removal; TopologyError when one loses its cell or a node it reads."""
+    orphans = set(gone.orphans.tolist())
+    out = {}
+    for name, (cell, nodes) in probes.items():
+        if cell is not None and cell >= 0:
+            cell = int(gone.new_ids[cell])
+            if cell < 0:
+                raise TopologyError(f"the cells it removes hold probe {name!r}, which would read nothing from "
+                                    "then on; move the probe or the box")
+        elif orphans & set(np.asarray(nodes).tolist()):
+            raise TopologyError(f"it leaves nodes probe {name!r} averages without a cell, which would read zero "
+                                "from then on; narrow the probe's region/box or the removal's")
+        out[name] = (cell, nodes)
+    return out
 
 
 def _step(event, solver) -> int:

@@ -548,3 +548,13 @@ def test_every_cutting_example_sets_up():
         assert sim.topology is not None and sim.topology.actions, path.name
         names.append(path.stem)
     assert names == ["beam_cut", "beam_refine", "organ_resection", "slab_incision", "slab_tearing"]
+
+
+def test_a_removal_that_takes_away_a_probe_is_refused_before_the_run():
+    text = FALL.replace("""[[cut]]
+step = 1
+plane = [[0.1, 0, 0], [1, 0, 0]]""", """[[remove]]
+step = 2
+box = [[1.0, -1, -1], [2, 1, 1]]""")
+    with pytest.raises(tm.TensormassError, match=r"remove\[0\]: the cells it removes hold probe 'tip'"):
+        _run(text)
