@@ -32,11 +32,6 @@ from .errors import TensormassError
 __all__ = ["HangingNodes", "hanging_nodes"]
 
 
-def _cells_by_node(mesh):
-    from .topology import incidence
-    return incidence(mesh)
-
-
 def hanging_nodes(mesh) -> tuple:
     """(slaves, masters (m, 4) -1 padded, weights (m, 4)) of the mesh's hanging nodes (empty arrays
     when Mesh.midpoints records none, or none of them hangs)."""
@@ -44,21 +39,10 @@ def hanging_nodes(mesh) -> tuple:
     empty = (np.zeros(0, np.int64), np.zeros((0, 4), np.int64), np.zeros((0, 4)))
     if rows is None or not len(rows):
         return empty
+    from .topology import cells_around, incidence
     rows = np.asarray(rows, dtype=np.int64)
-    inc = _cells_by_node(mesh)
     # candidate cells: those around each node's first parent
-    first = rows[:, 1]
-    counts = inc.ptr[first + 1] - inc.ptr[first]
-    which = np.repeat(np.arange(len(rows)), counts)
-    at = np.repeat(inc.ptr[first] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    cells = inc.cell[at]
-    from .topology import _locate
-    block, row = _locate(mesh, cells)
-    k = max(b.cells.shape[1] for b in mesh.blocks)
-    nodes = np.full((cells.size, k), -1, dtype=np.int64)
-    for b in np.unique(block):
-        mine = block == b
-        nodes[mine, :mesh.blocks[b].cells.shape[1]] = mesh.blocks[b].cells[row[mine]]
+    which, _, nodes = cells_around(mesh, incidence(mesh), rows[:, 1])
     parents = rows[which, 1:5]
     holds = ((parents[:, :, None] == nodes[:, None, :]).any(axis=2) | (parents < 0)).all(axis=1)
     has_node = (rows[which, 0][:, None] == nodes).any(axis=1)

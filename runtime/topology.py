@@ -44,7 +44,7 @@ from .. import elements as _types
 from .errors import TensormassError
 from .mesh import CellBlock, Mesh
 
-__all__ = ["TopologyError", "Incidence", "incidence", "face_owners", "plane_pairs", "box_cells", "separate", "Split",
+__all__ = ["TopologyError", "Incidence", "incidence", "cells_around", "face_owners", "plane_pairs", "box_cells", "separate", "Split",
            "removal", "Removal", "check_topology", "refine_hexahedra", "HexRefinement"]
 
 
@@ -124,6 +124,23 @@ def _cell_nodes(mesh: Mesh, cell_ids: np.ndarray) -> list:
     return [mesh.blocks[b].cells[r] for b, r in zip(block, row)]
 
 
+def cells_around(mesh: Mesh, inc: Incidence, nodes: np.ndarray) -> tuple:
+    """(which, cells, cell nodes): every cell around each of the given nodes, `which` the index of the
+    node it is around, and its nodes (-1 padded to the widest cell type)."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    counts = inc.ptr[nodes + 1] - inc.ptr[nodes]
+    which = np.repeat(np.arange(nodes.size), counts)
+    at = np.repeat(inc.ptr[nodes] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    cells = inc.cell[at]
+    block, row = _locate(mesh, cells)
+    k = max(b.cells.shape[1] for b in mesh.blocks)
+    out = np.full((cells.size, k), -1, dtype=np.int64)
+    for b in np.unique(block):
+        mine = block == b
+        out[mine, :mesh.blocks[b].cells.shape[1]] = mesh.blocks[b].cells[row[mine]]
+    return which, cells, out
+
+
 def face_owners(mesh: Mesh, faces: np.ndarray, inc: Incidence | None = None) -> np.ndarray:
     """The cell owning each boundary face (n, kf): the first cell around its first node holding all of
     its nodes (-1: none)."""
@@ -132,17 +149,7 @@ def face_owners(mesh: Mesh, faces: np.ndarray, inc: Incidence | None = None) -> 
         return np.zeros(0, dtype=np.int64)
     faces = faces.reshape(len(faces), -1)
     inc = incidence(mesh) if inc is None else inc
-    first = faces[:, 0]
-    counts = inc.ptr[first + 1] - inc.ptr[first]
-    which = np.repeat(np.arange(len(faces)), counts)
-    at = np.repeat(inc.ptr[first] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    cells = inc.cell[at]
-    block, row = _locate(mesh, cells)
-    k = max(b.cells.shape[1] for b in mesh.blocks)
-    nodes = np.full((cells.size, k), -1, dtype=np.int64)
-    for b in np.unique(block):
-        mine = block == b
-        nodes[mine, :mesh.blocks[b].cells.shape[1]] = mesh.blocks[b].cells[row[mine]]
+    which, cells, nodes = cells_around(mesh, inc, faces[:, 0])
     holds = (faces[which][:, :, None] == nodes[:, None, :]).any(axis=2).all(axis=1)
     owners = np.full(len(faces), -1, dtype=np.int64)
     hit = np.flatnonzero(holds)
