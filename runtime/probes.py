@@ -25,7 +25,9 @@ weights on nodes (PointProbe.nodes, .weights): any linear combination of nodal v
 
 Element types: every registered solid type; polynomial ones (simplices, boxes, prisms, any
 order) through their Lagrange basis built from the element table's reference nodes, the
-pyramid through its rational basis (the one of runtime.mesh's checks).
+pyramid through its rational basis (the one of runtime.mesh's checks).  Shell triangles: the
+nearest point of the nearest triangle, with its barycentric weights (the displacement only).
+Bars and springs: a probe must sit on a node.
 """
 from __future__ import annotations
 
@@ -190,6 +192,8 @@ def locate_point(mesh, point, name: str = "probe") -> PointProbe:
         raise ProbeError(f"probe {name!r}: point must be {mesh.dim} finite numbers, got {list(np.ravel(point))}")
     body = PROBE_BODY_FRACTION * _body_size(mesh.points)
     if mesh.n_points and not _solid_blocks(mesh):
+        if any(blk.type == "shell" and len(blk) for blk in mesh.blocks):
+            return _shell_probe(mesh, p, name, body)
         return _node_probe(mesh, p, name, body)
     best = None                                  # (distance, tolerance, global cell, block, local, xi)
     offset = 0
@@ -266,6 +270,54 @@ def _node_probe(mesh, p, name, tol) -> PointProbe:
         raise ProbeError(f"probe {name!r} at {_fmt(p)} is not on a node: the mesh has no cells of its dimension "
                          f"(bars, springs), so probes must sit on nodes; nearest node {node} is {d[node]:.3g} away")
     return PointProbe(name, p, -1, np.array([node]), np.ones(1), np.zeros(0), float(d[node]))
+
+
+def _shell_probe(mesh, p, name, body) -> PointProbe:
+    """Shell triangles (3D surfaces): the nearest point of the nearest triangle, its barycentric weights
+    on the triangle's 3 nodes (the shell's translations are linear there; its rotations are not probed).
+    The same tolerance as solids: 10 % of that triangle's size, at least 1e-6 of the body's."""
+    offset, best = 0, None                       # (distance, tolerance, global cell, nodes)
+    for blk in mesh.blocks:
+        if blk.type == "shell" and len(blk):
+            T = mesh.points[blk.cells[:, :3]]
+            d = _triangle_distance(T, p)
+            size = np.linalg.norm(T.max(axis=1) - T.min(axis=1), axis=1)
+            tol = np.maximum(PROBE_CELL_FRACTION * size, body)
+            ok = np.flatnonzero(d <= tol)
+            if ok.size:
+                j = ok[np.argmin(d[ok])]
+                if best is None or d[j] < best[0]:
+                    best = (float(d[j]), float(tol[j]), offset + int(j), blk.cells[j, :3].copy())
+        offset += len(blk)
+    if best is None:
+        nearest = float(np.min(np.linalg.norm(mesh.points - p, axis=1)))
+        raise ProbeError(f"probe {name!r} at {_fmt(p)} is not on the shell surface (nearest node {nearest:.3g} "
+                         f"away); a probe on shells must lie on a triangle within {PROBE_CELL_FRACTION:.0%} of "
+                         "its size")
+    dist, _, cell, nodes = best
+    weights = _closest_barycentric(mesh.points[nodes], p)
+    return PointProbe(name, p, cell, nodes, weights, weights[1:].copy(),
+                      dist if dist > 1e-12 * max(_body_size(mesh.points), 1e-300) else 0.0)
+
+
+def _closest_barycentric(T, p) -> np.ndarray:
+    """Barycentric weights (3,) of the point of triangle T (3, 3) nearest to p."""
+    a, b, c = T
+    ab, ac = b - a, c - a
+    G = np.array([[ab @ ab, ab @ ac], [ab @ ac, ac @ ac]])
+    s, t = np.linalg.solve(G, [ab @ (p - a), ac @ (p - a)])
+    if s >= 0 and t >= 0 and s + t <= 1:
+        return np.array([1 - s - t, s, t])
+    best = None
+    for i, j in ((0, 1), (1, 2), (2, 0)):        # outside: the nearest point of the nearest edge
+        u, v = T[i], T[j]
+        w = float(np.clip((p - u) @ (v - u) / max((v - u) @ (v - u), 1e-300), 0.0, 1.0))
+        d = float(np.linalg.norm(u + w * (v - u) - p))
+        if best is None or d < best[0]:
+            weights = np.zeros(3)
+            weights[i], weights[j] = 1 - w, w
+            best = (d, weights)
+    return best[1]
 
 
 def _segment_distance(a, b, p):

@@ -368,3 +368,20 @@ def test_a_surface_file_becomes_shells_and_quadratic_surfaces_are_refused(tmp_pa
     meshio.write(tmp_path / "ball6.vtu", meshio.Mesh(P, [("triangle6", six)]))
     with pytest.raises(SceneError, match=r"triangle6 .*element order 1"):
         Scene.from_string(text.replace("ball.vtu", "ball6.vtu"))
+
+
+def test_a_probe_between_nodes_interpolates_on_its_triangle():
+    """A probe inside a triangle reads the barycentric mean of its nodes' displacements (the shell's
+    translations are linear on the triangle); one off the surface is refused naming the probe."""
+    from tensormass.runtime.probes import ProbeError, locate_point
+    sim = Simulation(plate_scene(8, "simply"), output=False)
+    sim.run()
+    mesh = sim.model.mesh
+    probe = locate_point(mesh, [0.3, 0.45, 0.0], "inside")
+    assert probe.nodes.size == 3 and np.all(probe.weights > 0) and probe.weights.sum() == pytest.approx(1.0)
+    x = probe.weights @ mesh.points[probe.nodes]
+    assert np.allclose(x, [0.3, 0.45, 0.0], atol=1e-12)
+    U = sim.displacement[:, :3]
+    assert np.allclose(probe.value(U), probe.weights @ U[probe.nodes])
+    with pytest.raises(ProbeError, match="'above' .* not on the shell surface"):
+        locate_point(mesh, [0.5, 0.5, 0.5], "above")
