@@ -39,7 +39,7 @@ from .. import elements as _types
 from .errors import TensormassError
 from .scene import switch_applies
 
-__all__ = ["CRITERIA", "Adapter", "Change", "criteria", "part_criteria"]
+__all__ = ["CRITERIA", "Adapter", "Change", "criteria", "part_criteria", "mean_deformation_gradients"]
 
 CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 
@@ -126,6 +126,24 @@ def _rotation_degrees_svd(F: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(cos))
 
 
+def _mean_F(v, G, ue) -> np.ndarray:
+    """(n, dim, dim) volume average of F = I + sum_i u_i (x) (average gradient of N_i): one small product."""
+    Gbar = np.einsum("eq,eqib->eib", v, G, optimize=True) / v.sum(axis=1)[:, None, None]
+    return np.eye(ue.shape[2]) + np.einsum("eia,eib->eab", ue, Gbar, optimize=True)
+
+
+def mean_deformation_gradients(model, u: np.ndarray) -> np.ndarray:
+    """(n_cells, dim, dim) volume-averaged deformation gradient of every cell, global order (I where no
+    material models it): what the rotation criterion and tearing (runtime.topology_events) read."""
+    dim = model.dim
+    F = np.broadcast_to(np.eye(dim), (model.mesh.n_cells, dim, dim)).copy()
+    for part in model.parts:
+        if part.n_active:
+            v, G = _geometry(part)
+            F[part.cell_ids_active] = _mean_F(v, G, model.element_displacements(part, u)[:, :, :dim])
+    return F
+
+
 def part_criteria(model, part, u: np.ndarray, names, asm=None) -> dict:
     """Criteria of a part's active cells: name -> (n_active,) array."""
     names = set(names)
@@ -157,9 +175,7 @@ def part_criteria(model, part, u: np.ndarray, names, asm=None) -> dict:
     if "R_A" in names:
         out["R_A"] = np.abs(S0 - S) / S0
     if "rotation" in names:
-        # the volume average of F is I + sum_i u_i (x) (average gradient of N_i): one small product
-        Gbar = np.einsum("eq,eqib->eib", v, G, optimize=True) / v.sum(axis=1)[:, None, None]
-        out["rotation"] = _rotation_degrees(np.eye(dim) + np.einsum("eia,eib->eab", ue, Gbar, optimize=True))
+        out["rotation"] = _rotation_degrees(_mean_F(v, G, ue))
     if "R_S" in names:
         if asm is None:
             raise TensormassError("criterion R_S needs the assembler (element forces)")

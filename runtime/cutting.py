@@ -32,8 +32,7 @@ import numpy as np
 
 from . import loads as _loads
 from .dofs import node_dofs
-from .mass import MassMatrix, lump, element_mass
-from .loads import has_table
+from .mass import MassMatrix
 from .model import LawGroup, Part
 from .motion import Motion
 from .probes import PointProbe
@@ -211,25 +210,10 @@ def _constraints(model, new, parents, orphans) -> None:
     new.free_dofs = np.setdiff1d(np.arange(new.n_dofs), new.fixed_dofs)
 
 
-def _contributions(points, part, rows, gravity):
-    """(cells (n, k), lumped masses (n, k), rotary (n, k) or None, body-force shares (n, k)) of part rows."""
-    cells = part.cells[rows]
-    if has_table(part.element, points.shape[1]):
-        Me = element_mass(points, part.element, cells, part.density[rows])
-    else:
-        share = part.density[rows] * part.volume[rows] / cells.shape[1]
-        Me = share[:, None, None] * np.eye(cells.shape[1])
-    lumped = lump(Me, part.element)
-    shares = None
-    if gravity is not None:
-        shares = _loads.volume_shares(points, part.element, cells, part.density[rows], measure=part.volume[rows])
-    return cells, lumped, shares
-
-
 def _masses_and_body_forces(model, new, parents, touched) -> None:
-    """Lumped masses and gravity of the touched nodes, summed again over the cells around them."""
+    """Lumped masses and gravity of the touched nodes, summed again from the per-cell contributions the
+    model kept since its build (Part.cell_masses, Part.cell_shares): nothing is integrated again."""
     dpn = model.dofs_per_node
-    points = new.mesh.points
     g = np.asarray(model.loads.gravity, float).reshape(-1)[:model.n_load] if np.any(model.loads.gravity) else None
     if model.mass_matrix.kind != "lumped":
         new._lumped_mass()                    # consistent masses: the whole matrix again (documented)
@@ -237,22 +221,17 @@ def _masses_and_body_forces(model, new, parents, touched) -> None:
     node_mass = np.concatenate([model.mass[::dpn], model.mass[::dpn][parents]])
     mask = touched_node_mask(new.n_points, touched)
     node_mass[mask] = 0.0
-    body = _body_part(model)
-    body = np.vstack([body, body[parents]])
+    body = np.vstack([model._body, model._body[parents]])
     body[mask] = 0.0
     for part in new.parts:
         rows = np.flatnonzero(part.active & mask[part.cells].any(axis=1))
         if not rows.size:
             continue
-        if part.cell_masses is not None and (g is None or part.cell_shares is not None):
-            cells, lumped = part.cells[rows], part.cell_masses[rows]      # kept from the build
-            shares = None if g is None else part.cell_shares[rows]
-        else:
-            cells, lumped, shares = _contributions(points, part, rows, g)
+        cells = part.cells[rows]
         hit = mask[cells]
-        np.add.at(node_mass, cells[hit], lumped[hit])
+        np.add.at(node_mass, cells[hit], part.cell_masses[rows][hit])
         if g is not None:
-            np.add.at(body, cells[hit], shares[hit][:, None] * g)
+            np.add.at(body, cells[hit], part.cell_shares[rows][hit][:, None] * g)
     if model.mass_matrix.kind == "lumped":
         new.mass = np.repeat(node_mass, dpn)
         new.mass_matrix = MassMatrix("lumped", dpn, new.n_dofs, new.mass)
@@ -267,27 +246,10 @@ def _masses_and_body_forces(model, new, parents, touched) -> None:
     new._body = body
 
 
-def _body_part(model) -> np.ndarray:
-    """(n_points, n_load) gravity's share of model.f_ext (computed from the cells when not kept)."""
-    body = getattr(model, "_body", None)
-    if body is not None:
-        return body
-    body = np.zeros((model.n_points, model.n_load))
-    if np.any(model.loads.gravity):
-        g = np.asarray(model.loads.gravity, float).reshape(-1)[:model.n_load]
-        for part in model.parts:
-            rows = np.flatnonzero(part.active)
-            shares = _loads.volume_shares(model.mesh.points, part.element, part.cells[rows], part.density[rows],
-                                          measure=part.volume[rows])
-            np.add.at(body, part.cells[rows], shares[:, :, None] * g)
-    model._body = body
-    return body
-
-
 def _other_loads(model) -> np.ndarray:
     """(n_points, dpn) of model.f_ext without gravity: nodal forces, moments, tractions."""
     F = model.f_ext.reshape(model.n_points, model.dofs_per_node).copy()
-    F[:, :model.n_load] -= _body_part(model)
+    F[:, :model.n_load] -= model._body
     return F
 
 

@@ -303,21 +303,6 @@ def _still_joined(mesh, pairs) -> np.ndarray:
     return pairs[np.isin(p[:, 0] * mesh.n_cells + p[:, 1], code)]
 
 
-def _mean_gradients(model, u) -> np.ndarray:
-    """(n_cells, dim, dim) volume-averaged deformation gradient of every cell (I where no material)."""
-    from .adapt import _geometry
-    dim = model.dim
-    F = np.broadcast_to(np.eye(dim), (model.mesh.n_cells, dim, dim)).copy()
-    for part in model.parts:
-        if not part.n_active:
-            continue
-        v, G = _geometry(part)
-        Gbar = np.einsum("eq,eqib->eib", v, G, optimize=True) / v.sum(axis=1)[:, None, None]
-        ue = model.element_displacements(part, u)[:, :, :dim]
-        F[part.cell_ids_active] = np.eye(dim) + np.einsum("eia,eib->eab", ue, Gbar, optimize=True)
-    return F
-
-
 def _face_normals(points, keys) -> np.ndarray:
     """Unit normals (m, dim) of faces given by sorted corner keys (m, 4), -1 padded (3D), or edges (2D)."""
     if points.shape[1] == 2:
@@ -342,7 +327,8 @@ def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.
     face's rest normal and F the mean of the two cells' volume-averaged deformation gradients."""
     from .topology import _face_rows
     mesh = model.mesh
-    F = _mean_gradients(model, u)
+    from .adapt import mean_deformation_gradients
+    F = mean_deformation_gradients(model, u)
     stretch = np.sqrt(np.linalg.eigvalsh(np.einsum("eji,ejk->eik", F, F))[:, -1])
     hot = np.flatnonzero(stretch >= 1.0 + threshold)
     if box is not None and hot.size:
