@@ -222,9 +222,17 @@ def check_against_mesh(scene, mesh) -> None:
         elif not box_contains(load.box, mesh.points, tol).any():
             raise SceneError(f"{key}.box: no mesh node inside{bounds}")
     for i, load in enumerate(getattr(scene.loads, "pressure", ())):
-        vec(load.box[0], f"loads.pressure[{i}].box")
-        if not box_contains(load.box, mesh.points, tol).any():
-            raise SceneError(f"loads.pressure[{i}].box: no mesh node inside{bounds}")
+        key = f"loads.pressure[{i}]"
+        if load.box is not None:
+            vec(load.box[0], f"{key}.box")
+        if any(b.type == "shell" for b in mesh.blocks):     # shell triangles: checked by the model
+            continue
+        if getattr(load, "region", None) is not None:       # boundary faces of a group (and box)
+            if not region_faces(mesh, load.region, load.box, key=f"{key}.region", tol=tol, what="a pressure"):
+                where = "" if load.box is None else " inside its box"
+                raise SceneError(f"{key}: region {load.region!r} has no boundary face{where}")
+        elif not box_contains(load.box, mesh.points, tol).any():
+            raise SceneError(f"{key}.box: no mesh node inside{bounds}")
     for i, p in enumerate(scene.probes):
         if p.point is None:                                 # region and/or box: the mean over their nodes
             if getattr(p, "box", None) is not None:

@@ -14,6 +14,7 @@ from tensormass.runtime.mesh_groups import Group, read_groups
 from tensormass.runtime.model import Model
 from tensormass.runtime.regions import (assign_materials, find_group, known_regions, region_faces, region_nodes)
 from tensormass.runtime.scene import Fixed, Material, NodalLoad, Probe, Scene, Loads
+from tensormass.runtime.simulation import Simulation
 
 L, W = 1.0, 0.2
 
@@ -346,3 +347,37 @@ def test_2d_curve_groups_carry_tractions():
         f = model.f_ext.reshape(-1, 2)
         assert f.sum(axis=0) == pytest.approx([-3.0 * 0.6, 2.0 * 0.6])
         assert np.allclose(np.delete(f, region_nodes(mesh, "side"), axis=0), 0.0)
+
+
+# every documented way to place a load: box alone, region alone, region and box (issue: a pressure on a
+# region without a box crashed in the scene check)
+_TIP_BOX = [[L - 1e-9, -1, -1], [L + 1e-9, 1, 1]]
+_LOW_TIP_BOX = [[L - 1e-9, -1, -1], [L + 1e-9, 1, 0.1]]       # the tip's faces reaching z <= 0.1 only: none whole
+
+
+@pytest.mark.parametrize("kind, value", [("force", [0.0, 0.0, -1.0]), ("traction", [0.0, 0.0, -1.0]),
+                                         ("pressure", 10.0)])
+@pytest.mark.parametrize("where", ["box", "region", "region and box"])
+def test_every_load_kind_by_box_region_or_both(bar_file, kind, value, where):
+    load = {"value": value}
+    if "box" in where:
+        load["box"] = _TIP_BOX
+    if "region" in where:
+        load["region"] = "tip"
+    scene = Scene.from_dict(_scene_dict(loads={kind: [load]}), base_dir=bar_file.parent)
+    summary = Simulation(scene).run()
+    assert summary.status == "ok", summary.message
+    model = Model.from_scene(scene)
+    if kind == "pressure":
+        loaded = np.unique(np.concatenate([faces.ravel() for faces, _ in model.pressure.groups.values()]))
+    else:
+        loaded = np.flatnonzero(np.abs(model.f_ext.reshape(-1, 3)).sum(axis=1))
+    assert loaded.size and np.allclose(model.mesh.points[loaded, 0], L)      # the tip's nodes only
+
+
+@pytest.mark.parametrize("kind, value", [("traction", [0.0, 0.0, -1.0]), ("pressure", 10.0)])
+def test_a_face_load_whose_region_has_no_face_in_its_box_is_refused(bar_file, kind, value):
+    load = {"value": value, "region": "tip", "box": _LOW_TIP_BOX}
+    with pytest.raises(SceneError, match=rf"^loads\.{kind}\[0\]: region 'tip' has no boundary face inside its box"):
+        Scene.from_dict(_scene_dict(loads={kind: [load]}), base_dir=bar_file.parent)
+
