@@ -125,6 +125,8 @@ HISTORY_ROWS = 4096
 HISTORY_ROW_BYTES = 8 * 32 * 2
 HISTORY_BYTES_PER_PROBE = 3 * 32 * 2
 HISTORY_BYTES_PER_FIXED = 6 * 32 * 2
+# runtime.solids.LAYERS (not imported: a test checks they agree): the ball's layers per cell of its core.
+BALL_LAYERS = 2.0 / 3.0
 # Uniform [[adapt]] refinement (every cell marked, the worst case) per round: cells x 2.0,
 # nodes x 1.6-2.3 measured on tetra and triangle bars.
 REFINE_CELLS, REFINE_NODES = 2.0, 2.5
@@ -308,6 +310,24 @@ class MeshCounts:
         return cls(len(spec.cells), nodes, cells, float(spec.cells[longest]))
 
 
+    @classmethod
+    def of_generated(cls, spec) -> "MeshCounts":
+        """From any generated mesh's MeshSpec (bar, shell plate or sphere, solid ball), without
+        building it: a mesh too big for the machine is refused before its arrays exist."""
+        if getattr(spec, "element", None) == "shell" and spec.generate == "plate":
+            nx, ny = (int(c) for c in spec.cells[:2])
+            return cls(3, (nx + 1) * (ny + 1), {"shell": 2 * nx * ny}, float(max(nx, ny)))
+        if getattr(spec, "element", None) == "shell" and spec.generate == "sphere":
+            k = 4 ** int(spec.subdivisions)          # runtime.surfaces.icosphere's counts
+            return cls(3, 10 * k + 2, {"shell": 20 * k}, float(2 ** int(spec.subdivisions)))
+        if spec.generate == "ball":
+            n = int(spec.divisions)                  # runtime.solids.ball_tetrahedra's counts
+            layers = max(1, round(BALL_LAYERS * n))
+            nodes = (n + 1) ** 3 + layers * (6 * (n + 1) ** 2 - 12 * (n + 1) + 8)   # core + 6 face blocks
+            return cls(3, nodes, {"tetra": 6 * (n ** 3 + 6 * n ** 2 * layers)}, float(n + 2 * layers))
+        return cls.of_bar(spec)
+
+
 def _layers(points, cells: dict, dim: int) -> float:
     """Cell layers along the bounding box's longest side, for cells of the box's mean size."""
     if len(points) < 2:
@@ -458,7 +478,7 @@ def scene_counts(scene) -> MeshCounts:
         mesh = scene.load_mesh()
     if mesh is not None:
         return MeshCounts.of_mesh(mesh)
-    return MeshCounts.of_bar(scene.mesh)
+    return MeshCounts.of_generated(scene.mesh)
 
 
 def _refined(counts: MeshCounts, adapt) -> MeshCounts:

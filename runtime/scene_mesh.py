@@ -48,6 +48,8 @@ def load_mesh(scene):
         spec = scene.mesh
         key = "mesh.file" if spec.file is not None else "mesh"
         try:
+            if spec.file is None:                 # generated: estimated before anything is built
+                _check_resources(scene, resources.MeshCounts.of_generated(spec))
             if spec.generate == "ball":
                 mesh = ball_mesh(spec)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
@@ -56,7 +58,6 @@ def load_mesh(scene):
                 check_coordinates(mesh.points)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
             else:
-                _check_resources(scene, resources.MeshCounts.of_bar(spec))
                 mesh = _mesh.generate_bar(spec.size, spec.cells, spec.element, spec.origin)
                 check_coordinates(mesh.points)
         except MeshError as exc:
@@ -135,6 +136,8 @@ def _file_triangles(path):
 
 def build_mesh(spec):
     """Generate or read the mesh of a MeshSpec and check it."""
+    if spec.file is None and spec.generate in SURFACES + ("ball",):
+        resources.check(resources.estimate(resources.MeshCounts.of_generated(spec)), what=f"the generated {spec.generate}")
     if getattr(spec, "element", None) == "shell":
         mesh = shell_mesh(spec)
     elif spec.generate == "ball":

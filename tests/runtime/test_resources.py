@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import tracemalloc
+from types import SimpleNamespace
 
 import meshio
 import numpy as np
@@ -296,3 +297,42 @@ point = [1.0, 0.1, 0.1]
     rows = resources.HISTORY_ROWS                                  # 10 000 steps: the bound
     assert plain == rows * (resources.HISTORY_ROW_BYTES + resources.HISTORY_BYTES_PER_FIXED)
     assert more - plain == rows * (resources.HISTORY_BYTES_PER_FIXED + resources.HISTORY_BYTES_PER_PROBE)
+
+
+# ------------------------------------------------------------------------------ every generated mesh
+
+
+@pytest.mark.parametrize("spec", [{"generate": "plate", "element": "shell", "cells": [7, 5], "size": [1.0, 0.5]},
+                                  {"generate": "sphere", "element": "shell", "subdivisions": 2},
+                                  {"generate": "ball", "element": "tetra", "divisions": 2},
+                                  {"generate": "ball", "element": "tetra", "divisions": 5}])
+def test_generated_counts_match_the_generated_meshes(spec):
+    from tensormass.runtime.scene_mesh import ball_mesh, shell_mesh
+    spec = SimpleNamespace(file=None, origin=(0.0, 0.0, 0.0), radius=1.0, **spec)
+    mesh = shell_mesh(spec) if spec.element == "shell" else ball_mesh(spec)
+    counts = MeshCounts.of_generated(spec)
+    assert (counts.nodes, counts.cells) == (mesh.n_points, {b.type: len(b) for b in mesh.blocks})
+    assert resources.BALL_LAYERS == __import__("tensormass.runtime.solids", fromlist=["LAYERS"]).LAYERS
+
+
+_SHELL = {"law": "cst_dkt", "E": 1e7, "nu": 0.3, "thickness": 0.01, "density": 1000.0}
+
+
+@pytest.mark.parametrize("mesh, material, limit", [
+    ({"generate": "plate", "size": [1.0, 1.0], "cells": [20000, 20000]}, _SHELL, "8 GiB"),
+    ({"generate": "sphere", "radius": 1.0, "subdivisions": 7}, _SHELL, "64 MiB"),
+    ({"generate": "ball", "radius": 1.0, "divisions": 40}, {"law": "stvk", "E": 1e6, "nu": 0.3}, "64 MiB"),
+    ({"generate": "bar", "size": [1.0, 1.0, 1.0], "cells": [400, 400, 400], "element": "hexahedron"},
+     {"law": "mss", "E": 1e6, "nu": 0.25, "density": 1000.0}, "8 GiB"),
+])
+def test_every_generated_mesh_is_refused_before_it_is_built(mesh, material, limit, monkeypatch):
+    from tensormass.runtime import scene_mesh, solids, surfaces
+    for module, name in ((surfaces, "plate"), (surfaces, "icosphere"), (solids, "ball_tetrahedra"),
+                         (mesh_module, "generate_bar")):
+        monkeypatch.setattr(module, name, lambda *a, _n=name, **k: pytest.fail(f"{_n}: the mesh was built"))
+    monkeypatch.setattr(scene_mesh, "ball_tetrahedra", lambda *a, **k: pytest.fail("the ball was built"),
+                        raising=False)
+    data = {"mesh": mesh, "material": [material], "fixed": [{"box": [[-9, -9, -9], [9, 9, 1e-9]]}],
+            "solver": {"kind": "static"}}
+    with pytest.raises(ResourceError, match=f"above the limit of {limit}"):
+        Scene.from_dict(data, max_memory=limit.replace(" ", "").replace("iB", ""))
