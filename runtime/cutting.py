@@ -30,6 +30,7 @@ import copy
 
 import numpy as np
 
+from .. import laws
 from . import loads as _loads
 from .dofs import node_dofs
 from .mass import MassMatrix
@@ -44,13 +45,17 @@ __all__ = ["separated", "removed", "check_model", "touched_node_mask"]
 def check_model(model) -> None:
     """Refuse models whose topology cannot change during a run (see the module docstring)."""
     if any(_flat(model, b.type) for b in model.mesh.blocks):
-        raise TopologyError("cut/remove: only solid meshes can change topology here (shells, bars and springs "
+        raise TopologyError("only solid meshes can change topology here (shells, bars and springs "
                             "cannot be cut yet)")
+    springs = sorted({p.law for p in model.parts if laws.is_discrete(p.law)})
+    if springs:
+        raise TopologyError(f"spring models (law {', '.join(map(repr, springs))}) cannot be cut, removed or refined "
+                            "yet: their lattice springs are not split with the cells; use a continuum law there")
     if getattr(model, "couplings", None):
-        raise TopologyError("cut/remove: locking-free formulations (material formulation) cannot be combined "
+        raise TopologyError("locking-free formulations (material formulation) cannot be combined "
                             "with topology changes yet; use formulation = \"displacement\"")
     if model.adapt:
-        raise TopologyError("cut/remove: [[adapt]] rules cannot be combined with [[cut]] / [[remove]] / [[refine]] "
+        raise TopologyError("[[adapt]] rules cannot be combined with [[cut]] / [[remove]] / [[refine]] "
                             "events yet")
 
 

@@ -372,9 +372,7 @@ def pieces(mesh) -> tuple:
 
 def _refuse_floating(model, label, step) -> None:
     """A static run has no equilibrium for a piece that no [[fixed]] entry holds: say so."""
-    count, piece = pieces(model.mesh)
-    if count == 1:
-        return
+    count, piece = pieces(model.mesh)         # one piece too: a removal may take away what held it
     held = np.zeros(model.n_points, dtype=bool)
     held[np.unique(model.fixed_dofs // model.dofs_per_node)] = True
     cells = np.concatenate([b.cells for b in model.mesh.blocks]) if len(model.mesh.blocks) == 1 else None

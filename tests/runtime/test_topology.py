@@ -558,3 +558,26 @@ step = 2
 box = [[1.0, -1, -1], [2, 1, 1]]""")
     with pytest.raises(tm.TensormassError, match=r"remove\[0\]: the cells it removes hold probe 'tip'"):
         _run(text)
+
+
+def test_a_static_run_refuses_a_single_piece_that_a_removal_leaves_unheld():
+    """Removing the clamped end leaves one piece (no split) that nothing holds any more."""
+    text = (FALL.replace('kind = "implicit_euler"', 'kind = "static"').replace("steps = 250", "steps = 3")
+            .replace("[[cut]]\nstep = 1\nplane = [[0.1, 0, 0], [1, 0, 0]]",
+                     "[[remove]]\nstep = 1\nbox = [[-1, -1, -1], [0.1, 1, 1]]")
+            .replace('point = [0.05, 0.1, 0.1]', 'point = [0.6, 0.1, 0.1]'))
+    with pytest.raises(tm.RunStopped, match=r"remove\[0\] after step 1 leaves a piece of 44 cell\(s\) that nothing holds"):
+        _run(text).run()
+
+
+@pytest.mark.parametrize("law", ["mss", "hybmss"])
+@pytest.mark.parametrize("event", ["[[cut]]\nstep = 1\nplane = [[0.6, 0, 0], [1, 0, 0]]\n",
+                                   "[[remove]]\nstep = 1\nbox = [[0.5, -1, -1], [0.7, 1, 1]]\n",
+                                   "[[refine]]\nstep = 1\nbox = [[0.3, -1, -1], [0.7, 1, 1]]\n"])
+def test_spring_models_are_refused_by_every_topology_event(law, event):
+    text = (PATCH.split("[[refine]]")[0].replace('law = "hooke"\nquadrature = "gauss2"', f'law = "{law}"')
+            .replace("nu = 0.0", "nu = 0.25").replace("[12, 2, 2]", "[6, 1, 1]").replace("0.2, 0.2]", "0.2, 0.2]")
+            .replace("size = [1.2, 0.2, 0.2]", "size = [1.2, 0.2, 0.2]")) + event
+    kind = event.split("]]")[0].strip("[")
+    with pytest.raises(tm.TensormassError, match=rf"^{kind}: spring models \(law '{law}'\) cannot be cut, removed or refined"):
+        _run(text)
