@@ -295,7 +295,8 @@ def _derive(names, W, F, P) -> dict:
     if "energy_density" in names:
         out["energy_density"] = W
     if {"cauchy_stress", "von_mises", "pressure"} & set(names):
-        sigma = np.einsum("nqab,nqcb->nqac", P, F) / J[..., None, None]
+        with np.errstate(divide="ignore", invalid="ignore"):     # J = 0: undefined, NaN (the caller decides)
+            sigma = np.einsum("nqab,nqcb->nqac", P, F) / J[..., None, None]
         trace = np.trace(sigma, axis1=-2, axis2=-1)
         if "cauchy_stress" in names:
             out["cauchy_stress"] = sigma

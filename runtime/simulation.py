@@ -501,6 +501,11 @@ class Simulation:
         names = self._frame_fields()          # [output] fields (runtime.fields): nodal and cell data
         if names:
             point, cell = self.fields(names)
+            if flag is not None:
+                (point, n_point), (cell, n_cell) = _undefined_as_zero(point), _undefined_as_zero(cell)
+                undefined = n_point + n_cell
+                if undefined:
+                    extra["flag"] = f"{flag}; {undefined} field value(s) undefined there (det F = 0), written as 0"
             fields.update(point)
             extra["cell_fields"] = {**extra.get("cell_fields", {}), **cell}
         try:
@@ -555,6 +560,19 @@ class Simulation:
         if not names:
             return None
         return {"names": list(names), "law_ids": self.model.law_names(), "fields": _fields.describe(names)}
+
+
+def _undefined_as_zero(fields: dict) -> dict:
+    """(fields with NaN/Inf entries set to 0, how many there were), for a frame already marked by the
+    health monitor: a collapsed element (det F = 0) has no Cauchy stress, and that frame is written
+    with its mark rather than refused (unmarked frames keep the writer's NaN refusal)."""
+    out, count = {}, 0
+    for name, values in fields.items():
+        values = np.asarray(values)
+        bad = ~np.isfinite(values) if values.dtype.kind in "fc" else np.zeros(values.shape, bool)
+        out[name] = np.where(bad, 0.0, values) if bad.any() else values
+        count += int(bad.sum())
+    return out, count
 
 
 def _as_lists(reactions: dict, keys) -> dict:
