@@ -10,6 +10,8 @@ Each line names the material (``material[i]``), the element it concerns and what
 - locking: a displacement formulation with Poisson's ratio >= LOCKING_NU on linear elements
   (runtime.formulations.LINEAR_ELEMENTS) is too stiff; the locking-free formulation is named
   (runtime.formulations.locking_free_choice), or, where there is none, a finer or quadratic mesh.
+  A formulation that an element accepts but that does not cure its locking (NOT_CURED: mean
+  dilatation on wedges) is advised against the same way.
 - hourglass: an element x quadrature whose stiffness at rest has more zero-energy modes than rigid
   motions (runtime.hourglass.spurious_modes, decided from the kernel itself).
 
@@ -56,12 +58,23 @@ def _modelled_elements(scene, mesh) -> dict:
     return out
 
 
+# (formulation, element) that a scene may choose but that does not cure the element's locking: why
+NOT_CURED = {("mean_dilatation", "wedge"): "under a load in the plane of prism layers a linear prism's dilatation "
+                                           "is already constant per cell, so the cell mean changes nothing "
+                                           "(P1/P0 triangles' one volume constraint per cell)"}
+
+
 def _locking(key, material, element) -> str | None:
     formulation = getattr(material, "formulation", DEFAULT_FORMULATION)
     nu = poisson_ratio(material)
-    if formulation != "displacement" or element not in LINEAR_ELEMENTS or nu is None or nu < LOCKING_NU:
+    if element not in LINEAR_ELEMENTS or nu is None or nu < LOCKING_NU:
         return None
     choice = locking_free_choice(element)
+    if (formulation, element) in NOT_CURED:
+        return (f"{key}: nu = {nu:.4g} on {element} with {formulation} still locks (too stiff) in layers loaded in "
+                f"their plane: {NOT_CURED[formulation, element]}; use formulation = \"{choice}\"")
+    if formulation != "displacement":
+        return None
     fix = (f"use formulation = \"{choice}\"" if choice is not None else
            "no locking-free formulation exists for it: refine the mesh or use quadratic elements")
     return (f"{key}: nu = {nu:.4g} on {element} with the displacement formulation locks (too stiff); {fix}")

@@ -64,7 +64,7 @@ def test_element_named_by_region_is_checked_while_parsing():
     ("tetra", "gauss1", "mean_dilatation", "tetra: mean_dilatation does not apply (one integration point already "
                                            "has one volume per element); use nodal_pressure"),
     ("hexahedron", "gauss2", "nodal_pressure", "hexahedron: nodal_pressure does not apply (it averages volumes at "
-                                               "the nodes of linear tetrahedra and triangles only); use mean_dilatation"),
+                                               "the nodes of linear tetrahedra, triangles and wedges only); use mean_dilatation"),
     ("pyramid", "gauss2", "mean_dilatation", "pyramid: mean_dilatation does not apply (it is made for hexahedron, "
                                              "quad, tetra10, triangle6, wedge); pyramid supports only displacement: "
                                              "refine the mesh or use quadratic elements"),
