@@ -691,6 +691,10 @@ def refine_hexahedra(mesh: Mesh, cell_ids) -> HexRefinement:
     created: dict = {}
     parents_of_new: list = []
     midpoints = [] if mesh.midpoints is None else [np.asarray(mesh.midpoints, dtype=np.int64)]
+    # a node an earlier refinement put on an edge or face is that edge's or face's node now too
+    # (a new one at the same place would tear the mesh there)
+    for known in (midpoints[0].tolist() if midpoints else []):
+        created[tuple(sorted(p for p in known[1:] if p >= 0))] = known[0]
 
     def node_for(corners: tuple):
         nonlocal n
