@@ -656,6 +656,46 @@ def _check_structure(mesh: Mesh) -> None:
         raise MeshError(f"node index out of range 0..{mesh.n_points - 1} in cells {_fmt_ids(out_of_range)}")
     if repeated.size:
         raise MeshError(f"repeated node within a cell in cells {_fmt_ids(repeated)}")
+    _check_duplicated_cells(mesh, off)
+    _check_shell_windings(mesh, off)
+
+
+def _check_duplicated_cells(mesh: Mesh, off) -> None:
+    """Two cells on the same nodes (a file listing a cell twice) would count its stiffness, mass and
+    loads twice: refused, naming the pairs."""
+    pairs = []
+    for ctype in dict.fromkeys(b.type for b in mesh.blocks):
+        mine = [bi for bi, b in enumerate(mesh.blocks) if b.type == ctype and len(b)]
+        if not mine:
+            continue
+        rows = np.sort(np.concatenate([mesh.blocks[bi].cells for bi in mine]), axis=1)
+        ids = np.concatenate([off[bi] + np.arange(len(mesh.blocks[bi])) for bi in mine])
+        _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        again = np.flatnonzero(first[inverse] != np.arange(len(rows)))
+        pairs += [(ctype, int(ids[first[inverse[i]]]), int(ids[i])) for i in again]
+    if pairs:
+        head = "; ".join(f"{t} cells {a} and {b}" for t, a, b in pairs[:5])
+        raise MeshError(f"duplicated cells (overlapping: the same nodes twice, their stiffness, mass and "
+                        f"loads would count twice): {head}{' ...' if len(pairs) > 5 else ''} ({len(pairs)} duplicate(s) in all)")
+
+
+def _check_shell_windings(mesh: Mesh, off) -> None:
+    """Shell triangles take their normal (pressure, the enclosed volume) from their winding:
+    neighbours wound against each other would push opposite ways.  A file's shell triangles are
+    oriented when read (runtime.surfaces.orient_triangles); a mesh that still disagrees is refused."""
+    from .surfaces import winding_conflicts
+    for bi, blk in enumerate(mesh.blocks):
+        if blk.type != "shell" or not len(blk):
+            continue
+        bad = winding_conflicts(blk.cells)
+        if bad.size:
+            pairs = ", ".join(f"{off[bi] + a}-{off[bi] + b}" for a, b in bad[:5].tolist())
+            raise MeshError(f"shell triangles wound against their neighbours (their normals point to "
+                            f"opposite sides across a shared edge): cell pairs {pairs}"
+                            f"{' ...' if len(bad) > 5 else ''} ({len(bad)} edge(s)); wind every triangle "
+                            f"of a surface the same way (in gmsh: ReverseMesh Surface{{...}} on the surfaces that face the "
+                            f"other way)")
 
 
 def _fmt_point(p) -> str:

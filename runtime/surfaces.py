@@ -7,12 +7,18 @@ tubes and the pinched hemisphere.
     points, triangles = cylinder(radius, length, n_around, n_along)   # open tube along x
     points, triangles = hemisphere(radius, n_rings, n_around, hole_degrees=None)
     points, triangles = strip(length, width, nx, ny)            # a plate, for cantilever strips
+    triangles, notes = orient_triangles(points, triangles)      # a file's windings made consistent
 
 Every generator returns points float64 (n, 3) and triangles int64 (m, 3).  Winding: the triangles
 are counter-clockwise seen from outside (normal (x1 - x0) x (x2 - x0) outward) on the closed
 icosphere and on the open tube and hemisphere, and counter-clockwise seen from +z on the plate.
 The shell kernels and runtime.volume_constraint read the normal from this winding, so it is the
 one convention the generators promise; the tests check it triangle by triangle.
+
+A file's triangles may come wound either way.  orient_triangles makes the windings of each
+connected surface agree across its shared edges (a Moebius strip, which has no consistent
+winding, is refused), winds a closed surface outward and an open one like the majority of its
+triangles (the first triangle's side on a tie), and says what it turned.
 
 Sizes: icosphere(r, s) has 10 * 4**s + 2 nodes and 20 * 4**s triangles (s = 3: 1280 triangles;
 the 10 000-triangle benchmark gets s = 5, 20 480 triangles, from sphere_with_triangles).
@@ -25,7 +31,8 @@ from numbers import Integral, Real
 
 import numpy as np
 
-__all__ = ["plate", "strip", "icosphere", "sphere_with_triangles", "cylinder", "hemisphere"]
+__all__ = ["plate", "strip", "icosphere", "sphere_with_triangles", "cylinder", "hemisphere", "orient_triangles",
+           "winding_conflicts"]
 
 PATTERNS = ("right", "cross")
 
@@ -206,3 +213,102 @@ def hemisphere(radius, n_rings: int, n_around: int, hole_degrees=None):
     points = np.concatenate([[[0.0, 0.0, radius]], points])
     # the fan is counter-clockwise from +z: pole, t_j, t_j+1
     return points, np.concatenate([fan, 1 + bands]).astype(np.int64)
+
+
+# ------------------------------------------------------------------------------ windings of a file
+
+
+def _edge_pairs(triangles: np.ndarray):
+    """(t1, t2, same) per edge shared by exactly two triangles: same is True where both run along
+    the edge in the same direction (their windings disagree); and the number of triangles on each
+    triangle's edges (per triangle, 3 counts) for telling closed surfaces from open ones."""
+    m = len(triangles)
+    a = triangles.reshape(-1)
+    b = triangles[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    forward = a < b
+    owner = np.repeat(np.arange(m, dtype=np.int64), 3)
+    _, inverse, counts = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    order = np.argsort(inverse, kind="stable")
+    manifold = counts[inverse[order]] == 2
+    first = order[manifold][0::2]
+    second = order[manifold][1::2]
+    return owner[first], owner[second], forward[first] == forward[second], counts[inverse].reshape(m, 3)
+
+
+def winding_conflicts(triangles) -> np.ndarray:
+    """(k, 2) pairs of triangles that share an edge and run along it in the same direction (their
+    normals point to opposite sides)."""
+    t1, t2, same, _ = _edge_pairs(np.asarray(triangles, dtype=np.int64).reshape(-1, 3))
+    return np.stack([t1[same], t2[same]], axis=1)
+
+
+def orient_triangles(points, triangles, what: str = "the surface"):
+    """(triangles, notes): each connected surface wound consistently; see the module doc.
+
+    Surfaces are joined through edges that exactly two triangles share (a T-junction of three or
+    more leaves its sheets separate).  A closed surface (no edge with one triangle) is wound so
+    that its enclosed volume is positive (normals outward); an open one keeps the side of the
+    majority of its triangles.  notes: one sentence per surface whose triangles were turned.
+    Raises ValueError for a surface with no consistent winding (a Moebius strip), naming a
+    triangle where the windings meet."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    points = np.asarray(points, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    m = len(triangles)
+    if m == 0:
+        return triangles.copy(), []
+    t1, t2, same, edge_counts = _edge_pairs(triangles)
+    rows, cols = np.concatenate([t1, t2]), np.concatenate([t2, t1])
+    # parity + 1 so that a parity of 0 is a stored entry
+    G = csr_matrix((np.concatenate([same, same]).astype(np.int8) + 1, (rows, cols)), shape=(m, m))
+    n_comp, label = connected_components(G, directed=False)
+    flip = np.zeros(m, dtype=bool)
+    roots = np.full(n_comp, m, dtype=np.int64)
+    np.minimum.at(roots, label, np.arange(m))                  # lowest triangle id of each surface
+    for root in roots.tolist():
+        order, pred = breadth_first_order(G, root, directed=False, return_predecessors=True)
+        if order.size < 2:
+            continue
+        child = order[1:]
+        parity = np.asarray(G[child, pred[child]]).reshape(-1) - 1
+        f = flip.tolist()
+        for c, p, q in zip(child.tolist(), pred[child].tolist(), parity.tolist()):
+            f[c] = f[p] ^ bool(q)
+        flip[order] = np.asarray(f, dtype=bool)[order]
+    bad = (flip[t1] ^ flip[t2]) != same
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{what} has no consistent winding (a Moebius-like surface): triangles {int(t1[i])} "
+                         f"and {int(t2[i])} cannot face the same side across their shared edge, whatever "
+                         f"triangles are turned; {int(bad.sum())} such edge(s)")
+    notes = []
+    closed = np.bincount(label, weights=(edge_counts != 2).any(axis=1), minlength=n_comp) == 0
+    oriented = np.where(flip[:, None], triangles[:, ::-1], triangles)
+    X = points[oriented]
+    size = np.bincount(label, minlength=n_comp)
+    for k in range(n_comp):
+        mine = label == k
+        if closed[k]:
+            x = X[mine] - X[mine].reshape(-1, 3).mean(axis=0)
+            volume = np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6.0
+            if volume < 0:
+                flip[mine] = ~flip[mine]
+            why = "wound outward (closed surface)"
+        else:
+            turned = int(flip[mine].sum())
+            if 2 * turned > size[k]:
+                flip[mine] = ~flip[mine]
+            why = ("wound like the majority of its triangles (open surface)" if 2 * turned != size[k]
+                   else f"wound like its first triangle, {int(roots[k])} (open surface, half turned either way)")
+        n_turned = int(flip[mine].sum())
+        if n_turned:
+            ids = np.flatnonzero(mine & flip)
+            head = ", ".join(str(int(i)) for i in ids[:8]) + (", ..." if ids.size > 8 else "")
+            surface = what if n_comp == 1 else f"{what} (piece {k + 1} of {n_comp}, from triangle {int(roots[k])})"
+            notes.append(f"{surface}: {n_turned} of {int(size[k])} triangles turned [{head}] so that "
+                         f"the windings agree across shared edges; {why}")
+    return np.where(flip[:, None], triangles[:, ::-1], triangles).astype(np.int64), notes
