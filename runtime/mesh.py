@@ -37,7 +37,7 @@ from .mesh_groups import FACE_CORNERS, check_groups_on_surface, read_groups
 
 __all__ = [
     "MeshError", "Mesh", "CellBlock", "NODES_PER_CELL", "SOLID_TYPES_3D", "SOLID_TYPES_2D",
-    "read_mesh", "to_meshio", "generate_bar", "bar_counts", "check_mesh", "check_coordinates", "orient_cells",
+    "read_mesh", "read_meshio", "to_meshio", "generate_bar", "bar_counts", "check_mesh", "check_coordinates", "orient_cells",
     "boundary_faces", "face_measure", "COORD_MAX", "BAR_ELEMENTS",
 ]
 
@@ -194,23 +194,8 @@ def read_mesh(path) -> Mesh:
     $MeshFormat) get their node order converted to VTK's where it differs
     (GMSH_TO_VTK: the prism; meshio converts the quadratic types itself).
     """
-    import meshio
-
     path = Path(path)
-    if not path.is_file():
-        raise MeshError(f"mesh file not found: {path}")
-    if path.stat().st_size == 0:
-        raise MeshError(f"mesh file {path} is empty")
-    # meshio prints its reasons and may even call sys.exit(); capture both
-    said = io.StringIO()
-    try:
-        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-            m = meshio.read(path)
-    except (Exception, SystemExit) as exc:
-        detail = " ".join(said.getvalue().split())
-        reason = f"{type(exc).__name__}: {exc}" if not isinstance(exc, SystemExit) else ""
-        raise MeshError(f"could not read mesh {path}: " + " ".join(x for x in (reason, detail) if x)) from None
-
+    m = read_meshio(path)
     dims = {cb.type: _topological_dim(cb.type) for cb in m.cells}
     unknown = sorted(t for t, d in dims.items() if d is None)
     if unknown:
@@ -274,6 +259,31 @@ def read_mesh(path) -> Mesh:
             raise MeshError(f"{path}: {m.cells[i].type} cells (block {i} of the file) refer to nodes outside "
                             f"0..{len(points) - 1}")
     return Mesh(points, blocks, read_groups(m, all_tags, solid_ids, lower))
+
+
+def read_meshio(path):
+    """meshio.read(path), every failure a MeshError naming the file: a gmsh .msh file's sections and
+    counts are checked first (runtime.msh_check: a truncated or inconsistent file is refused naming
+    the broken part, where meshio would read part of it or fail with an array error)."""
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"mesh file not found: {path}")
+    if path.stat().st_size == 0:
+        raise MeshError(f"mesh file {path} is empty")
+    if _is_gmsh(path):
+        from .msh_check import check_msh
+        check_msh(path)
+    # meshio prints its reasons and may even call sys.exit(); capture both
+    said = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            return meshio.read(path)
+    except (Exception, SystemExit) as exc:
+        detail = " ".join(said.getvalue().split())
+        reason = f"{type(exc).__name__}: {exc}" if not isinstance(exc, SystemExit) else ""
+        raise MeshError(f"could not read mesh {path}: " + " ".join(x for x in (reason, detail) if x)) from None
 
 
 def _split_rows_by_tag(cell_type, n, tags, keep=None):
