@@ -8,6 +8,7 @@ tubes and the pinched hemisphere.
     points, triangles = hemisphere(radius, n_rings, n_around, hole_degrees=None)
     points, triangles = strip(length, width, nx, ny)            # a plate, for cantilever strips
     triangles, notes = orient_triangles(points, triangles)      # a file's windings made consistent
+    points, triangles, notes = read_shell_triangles(path)       # a surface file's triangles, oriented
 
 Every generator returns points float64 (n, 3) and triangles int64 (m, 3).  Winding: the triangles
 are counter-clockwise seen from outside (normal (x1 - x0) x (x2 - x0) outward) on the closed
@@ -32,7 +33,7 @@ from numbers import Integral, Real
 import numpy as np
 
 __all__ = ["plate", "strip", "icosphere", "sphere_with_triangles", "cylinder", "hemisphere", "orient_triangles",
-           "winding_conflicts"]
+           "winding_conflicts", "read_shell_triangles"]
 
 PATTERNS = ("right", "cross")
 
@@ -312,3 +313,42 @@ def orient_triangles(points, triangles, what: str = "the surface"):
             notes.append(f"{surface}: {n_turned} of {int(size[k])} triangles turned [{head}] so that "
                          f"the windings agree across shared edges; {why}")
     return np.where(flip[:, None], triangles[:, ::-1], triangles).astype(np.int64), notes
+
+
+def read_shell_triangles(path):
+    """(points (n, 3), triangles, notes) of a surface mesh file read as shells: its 3-node triangles
+    (curves and points left out, unused points dropped), duplicated triangles refused by id, each
+    surface's windings made to agree (orient_triangles; its notes say what was turned).  Volume
+    cells and quadratic triangles are refused by name.  Reading goes through mesh.read_meshio (a
+    broken .msh file is refused naming the broken part)."""
+    from .mesh import MeshError, _topological_dim, read_meshio
+    m = read_meshio(path)
+    blocks = [np.asarray(cb.data, dtype=np.int64) for cb in m.cells if cb.type == "triangle"]
+    other = sorted({cb.type for cb in m.cells if cb.type != "triangle" and _topological_dim(cb.type) not in (0, 1)})
+    if other:
+        hint = " (shells are linear triangles: mesh with element order 1)" if "triangle6" in other else \
+            " (remove them or mesh the surface alone)"
+        raise MeshError(f"{path}: element = \"shell\" takes 3-node triangle cells only; the file also has "
+                        f"{', '.join(other)}{hint}")
+    if not blocks:
+        raise MeshError(f"{path}: element = \"shell\" needs triangle cells; the file has none")
+    triangles = np.vstack(blocks)
+    points = np.asarray(m.points, dtype=np.float64)
+    if points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    if triangles.min() < 0 or triangles.max() >= len(points):
+        raise MeshError(f"{path}: triangles refer to nodes outside 0..{len(points) - 1}")
+    _, first, inverse = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_inverse=True)
+    again = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(len(triangles)))
+    if again.size:
+        pairs = "; ".join(f"{int(first[inverse.reshape(-1)[i]])} and {int(i)}" for i in again[:5])
+        raise MeshError(f"{path}: duplicated triangles (the same 3 nodes twice; their stiffness, mass and "
+                        f"loads would count twice): triangles {pairs}{' ...' if again.size > 5 else ''} "
+                        f"({again.size} in all, counted in the file's order)")
+    used, inverse = np.unique(triangles, return_inverse=True)
+    points, triangles = points[used], inverse.reshape(triangles.shape)
+    try:
+        triangles, notes = orient_triangles(points, triangles, what=str(path))
+    except ValueError as exc:
+        raise MeshError(str(exc)) from None
+    return points, triangles, notes

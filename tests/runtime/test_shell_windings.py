@@ -126,3 +126,13 @@ def test_a_plate_file_with_mixed_windings_deflects_like_a_consistent_one_or_is_r
         assert mixed == pytest.approx(right, rel=1e-9)
     duplicated = _centre(_plate_file(tmp_path, "twice.vtu", np.vstack([T, T[5:6]])))
     assert isinstance(duplicated, TensormassError) and "duplicated cells" in str(duplicated)
+
+
+def test_a_surface_file_is_read_with_its_windings_made_to_agree_and_duplicates_refused(tmp_path):
+    """surfaces.read_shell_triangles, the reader for element = "shell" files."""
+    _, T = surfaces.plate(1.0, 1.0, 6, 6)
+    points, triangles, notes = surfaces.read_shell_triangles(_plate_file(tmp_path, "mixed.vtu", _every_third_turned(T)))
+    assert np.array_equal(triangles, T) and len(notes) == 1 and "24 of 72 triangles turned" in notes[0]
+    check_mesh(Mesh(points, [CellBlock("shell", triangles)]))
+    with pytest.raises(MeshError, match=r"duplicated triangles.*triangles 5 and 72"):
+        surfaces.read_shell_triangles(_plate_file(tmp_path, "twice.vtu", np.vstack([T, T[5:6, [2, 0, 1]]])))
