@@ -31,6 +31,8 @@ def formulation_name(value, key: str) -> str:
 def _why_not(formulation: str, element: str) -> str:
     if formulation == "mean_dilatation" and element in _SIMPLICES:
         return "one integration point already has one volume per element"
+    if formulation == "edge_smoothed":
+        return "it smooths strains over the edges of linear triangles only"
     if formulation == "nodal_pressure":
         return "it averages volumes at the nodes of linear tetrahedra, triangles and wedges only"
     return f"it is made for {', '.join(FORMULATIONS[formulation])}"

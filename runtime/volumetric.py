@@ -20,6 +20,20 @@ The rank-one terms couple the cells of one group: inside one cell for mean dilat
 pressure the nodes of the cells around a node, so the Assembler adds those patches to the sparsity
 pattern (`patch_tables`).  The pressure of a group is U'(J_g); runtime.fields adds p_e dtheta/dF to
 the stress (`cell_terms`).
+
+"edge_smoothed" (linear triangles) is nodal pressure plus edge-based strain smoothing of the rest
+of the law (ES-FEM, Liu, Nguyen-Thoi & Lam 2009; with the node-based volumetric part: the
+selective ES/NS-FEM of Nguyen-Thoi et al. 2009):
+
+    Pi_dev = sum_k A_k W_dev(F_k),   A_k = sum_{e at edge k} A_e / 3,   F_k = sum_e (A_e / 3) F_e / A_k
+
+over the edges k whose cells share a material (an edge with one such cell takes A_e / 3 W_dev(F_e)).
+F_k is linear in the four nodes of the two triangles, so the generated one-point quad kernel of the
+law evaluates it: its constants D hold the weight and the shape gradients of the point, which are
+set to A_k and the smoothed gradients.  The part's own kernel still integrates A_e W_dev(F_e) per
+cell (its stress is what runtime.fields shows); this coupling adds the difference,
+sum_k A_k W_dev(F_k) - sum_e w_e A_e W_dev(F_e) with w_e = 1 - (edges of e counted alone) / 3.
+Under a homogeneous deformation every F_k is F: the patch test holds exactly.
 """
 from __future__ import annotations
 
@@ -30,7 +44,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from .. import laws
-from .errors import InvertedElementError
+from .errors import InvertedElementError, TensormassError
 
 __all__ = ["VolumetricCoupling", "volumetric_functions"]
 
@@ -89,6 +103,10 @@ class VolumetricCoupling:
         self.positions = None              # (n, nd, nd) CSR positions of the cells; set by the Assembler
         self.patch_positions = []          # per patch table (nodal pressure); set by the Assembler
         self.needs_positive = law_needs_positive(self.function, self.params)
+        self.edges = None
+        if formulation == "edge_smoothed":
+            self.edges = _EdgeSmoothing(model, part, self.rows, np.asarray(materials), params, self.parameter)
+            self.patch_tables.append(self.edges.dofs)
 
     # -- groups ----------------------------------------------------------------------------------
     def _groups(self, materials, n, k):
@@ -172,7 +190,10 @@ class VolumetricCoupling:
                 b = self.B @ fe.ravel()
                 for (members, slots), pos in zip(self._patch_index, self.patch_positions):
                     _scatter_patches(data, b, slots, members, c, pos)
-        return float(np.dot(self.V, Ug))
+        energy = float(np.dot(self.V, Ug))
+        if self.edges is not None:
+            energy += self.edges.evaluate(U, f, data, project, self.positions, self.patch_positions[-1])
+        return energy
 
     def cell_terms(self, U: np.ndarray) -> tuple:
         """(p_e, u_e) per cell at nodal displacements U: the factor of the measure's stress in the
@@ -189,6 +210,92 @@ class VolumetricCoupling:
         index = np.full(n_part_cells, -1, dtype=np.int64)
         index[self.rows] = np.arange(len(self.rows))
         return index
+
+
+class _EdgeSmoothing:
+    """The edge-smoothed deviatoric energy of formulation "edge_smoothed", as the difference it makes
+    to the part's cell-wise integration (module docstring)."""
+
+    def __init__(self, model, part, rows, materials, params, bulk):
+        from . import kernels as _kernels
+        self.part = part
+        cells = part.cells[rows]
+        n = len(cells)
+        G = part.kernel.point_gradients(part.D[rows])[:, 0]           # (n, 3, dim): constant on a triangle
+        area = part.kernel.point_volumes(part.D[rows]).sum(axis=1)
+        dim = G.shape[2]
+        # every (material, edge) with the cells that hold it: 2 cells = a smoothing domain of 4 nodes
+        local = np.array([[0, 1], [1, 2], [2, 0]])
+        ends = np.sort(cells[:, local], axis=2).reshape(-1, 2)                 # (3n, 2)
+        cell = np.repeat(np.arange(n), 3)
+        keys = np.column_stack([np.repeat(materials, 3), ends])
+        _, edge_of, count = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        edge_of = edge_of.ravel()
+        if count.max(initial=0) > 2:
+            raise TensormassError("edge_smoothed: an edge is shared by more than two triangles of one material "
+                                  "(a non-manifold mesh)")
+        shared = count[edge_of] == 2
+        order = np.argsort(edge_of[shared], kind="stable")
+        pair = cell[shared][order].reshape(-1, 2)                              # the two cells of each interior edge
+        opposite = (np.arange(3 * n)[shared][order] % 3 + 2) % 3               # the vertex opposite the edge
+        opposite = opposite.reshape(-1, 2)
+        e0, e1 = pair[:, 0], pair[:, 1]
+        a_, b_ = cells[e0, (opposite[:, 0] + 1) % 3], cells[e0, (opposite[:, 0] + 2) % 3]
+        nodes = np.column_stack([a_, b_, cells[e0, opposite[:, 0]], cells[e1, opposite[:, 1]]])
+        # smoothed gradients: sum_e (A_e / 3) G_e[node] / A_k on the patch's four nodes
+        Ak = (area[e0] + area[e1]) / 3.0
+        Gk = np.zeros((len(nodes), 4, dim))
+        for e in (e0, e1):
+            for i in range(3):
+                node = cells[e, i]
+                slot = np.argmax(nodes == node[:, None], axis=1)
+                np.add.at(Gk, (np.arange(len(nodes)), slot), (area[e] / 3.0)[:, None] * G[e, i])
+        Gk /= Ak[:, None, None]
+        # cells' own weight left after the edges they share: 1 - (edges counted alone) / 3
+        alone = np.bincount(cell[~shared], minlength=n)
+        self.weight = 1.0 - alone / 3.0
+        self.cells, self.rows, self.nodes = cells, rows, nodes
+        self.cell_dofs = np.ascontiguousarray(part.dofs[rows], dtype=np.int64)
+        dpn = model.dofs_per_node
+        self.dofs = np.ascontiguousarray((nodes[:, :, None] * dpn + np.arange(dpn)).reshape(len(nodes), 4 * dpn))
+        self.D_cells = np.ascontiguousarray(part.D[rows])                      # W_dev: the bulk parameter is 0 there
+        self.kernel = _kernels.load_kernel("quad", part.law, "gauss1", backend=model.solver.backend)
+        k = self.kernel
+        if k.G_offset is None or k.n_points != 1:
+            raise TensormassError(f"edge_smoothed: the one-point quad kernel of law {part.law!r} has no shape "
+                                  "gradients in its constants")
+        dev = {p: np.array(np.broadcast_to(v, (len(part.cells),))[rows][e0], dtype=float)
+               for p, v in params.items()}
+        dev[bulk] = np.zeros(len(nodes))
+        square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])[:, :dim]
+        D = k.constants(np.broadcast_to(square, (len(nodes), 4, dim)), **dev)
+        D[:, k.v_offset] = Ak
+        D[:, k.G_offset:k.G_offset + 4 * dim] = Gk.reshape(len(nodes), 4 * dim)
+        self.D = np.ascontiguousarray(D)
+
+    def evaluate(self, U, f, data, project, cell_positions, edge_positions) -> float:
+        """Add sum_k A_k W_dev(F_k) - sum_e w_e A_e W_dev(F_e) to f and data; return it."""
+        from .assembly import _scatter_matrix, _scatter_vector, project_psd
+        part = self.part
+        uc = np.ascontiguousarray(U[self.cells])
+        ue = np.ascontiguousarray(U[self.nodes])
+        energy = float(self.kernel.energy(self.D, ue).sum() - np.dot(self.weight, part.kernel.energy(self.D_cells, uc)))
+        if data is not None:
+            fk, Kk = self.kernel.forces_and_stiffness(self.D, ue)
+            fc, Kc = part.kernel.forces_and_stiffness(self.D_cells, uc)
+            if project:
+                # the part adds its cells projected; taking w_e of the same projection off keeps the sum >= 0
+                project_psd(Kk, out=Kk)
+                project_psd(Kc, out=Kc)
+            Kc *= -self.weight[:, None, None]
+            _scatter_matrix(data, Kk, edge_positions, 1.0)
+            _scatter_matrix(data, Kc, cell_positions, 1.0)
+        elif f is not None:
+            fk, fc = self.kernel.forces(self.D, ue), part.kernel.forces(self.D_cells, uc)
+        if f is not None:
+            _scatter_vector(f, fk, self.dofs)
+            _scatter_vector(f, np.ascontiguousarray(-self.weight[:, None] * fc), self.cell_dofs)
+        return energy
 
 
 @njit(cache=True)
