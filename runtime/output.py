@@ -41,6 +41,15 @@ writer created it and it is still empty. Frames with NaN or Inf are refused
 written (disk full, permissions) raises OutputError naming it; the frames
 written before stay listed in the .pvd.
 
+One run per folder. The first frame takes the folder's lock, ``.tensormass.lock``:
+a file created atomically (O_CREAT | O_EXCL) holding the run's pid, host and
+process start, removed when the writer closes (release_lock(): a RunFiles holds it
+until the summary is written). Another run that finds the lock held by a live
+process is refused (TensormassError naming the folder and the pid): prepare()
+refuses before the run, and a run that passed prepare() at the same moment is
+refused at its first frame, before it removes or writes anything. A lock whose
+process is gone (killed, crashed) is stale and taken over.
+
 Summaries. ``write_summary(path, data)`` writes the run summary JSON
 atomically with the key ``"format": "tensormass-summary/1"``;
 ``check_summary_path`` refuses (before the run) a path holding anything but
@@ -50,6 +59,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import itertools
 import json
 import os
 import re
@@ -57,6 +67,7 @@ import signal
 import stat
 import tempfile
 import threading
+import weakref
 from pathlib import Path
 from xml.sax.saxutils import quoteattr, unescape
 
@@ -65,7 +76,7 @@ import numpy as np
 from ..generator.pipeline import write_atomic
 from .errors import TensormassError
 
-__all__ = ["Writer", "OutputError", "write_bytes_atomic", "write_json_atomic", "write_text_atomic",
+__all__ = ["Writer", "OutputError", "FolderLock", "LOCK_NAME", "write_bytes_atomic", "write_json_atomic", "write_text_atomic",
            "write_summary", "check_summary_path", "is_summary_file", "check_writable", "check_png_path", "xml_comment",
            "PVD_MARKER", "SUMMARY_FORMAT"]
 
@@ -81,6 +92,7 @@ _PVD_HEAD = ('<?xml version="1.0"?>\n' + PVD_MARKER + "\n"
 _PVD_TAIL = b"  </Collection>\n</VTKFile>\n"
 _DATASET_FILE_RE = re.compile(rb'<DataSet\b[^>]*\bfile="([^"<>]*)"')
 _MAX_COMMENT = 400
+LOCK_NAME = ".tensormass.lock"
 
 
 class OutputError(TensormassError):
@@ -268,6 +280,181 @@ def _xml_char(c: str) -> bool:
     return 0x20 <= o <= 0xD7FF or 0xE000 <= o <= 0xFFFD or o >= 0x10000
 
 
+# ============================================================================== one run per folder
+
+# Locks held by this process: lock path -> (token, weak reference to the holder). A lock file
+# with this process's pid is live only while its holder is.
+_HELD: dict = {}
+_TOKENS = itertools.count()
+
+
+def _process_start(pid: int):
+    """The kernel's start time of process pid (clock ticks since boot; Linux), None where unknown:
+    a pid reused by a new process after the holder died has another start."""
+    try:
+        with open(f"/proc/{int(pid)}/stat", "rb") as handle:
+            fields = handle.read().rsplit(b")", 1)[1].split()
+        return int(fields[19])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _host() -> str:
+    import socket
+    return socket.gethostname() or "?"
+
+
+class FolderLock:
+    """<folder>/.tensormass.lock: one run writes into a folder at a time (see the module docstring).
+
+        lock = FolderLock(folder, owner)
+        lock.check()        # TensormassError when a live run holds it (reads only)
+        lock.acquire()      # the folder exists; TensormassError when a live run holds it
+        lock.release()      # idempotent; removes the file only while it is still ours
+    """
+
+    def __init__(self, folder, owner=None):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_NAME
+        # weak: the Writer holds its lock, and a dropped Writer must be freed (and release it) at once
+        self._owner = weakref.ref(owner) if owner is not None else (lambda: self)
+        self.held = False
+        self._finalizer = None
+
+    @property
+    def owner(self):
+        return self._owner()
+
+    @staticmethod
+    def record(pid: int | None = None) -> str:
+        """The text of a lock held by process pid (default: this one)."""
+        pid = os.getpid() if pid is None else int(pid)
+        start = _process_start(pid)
+        return f"pid={pid} host={_host()} start={'?' if start is None else start}\n"
+
+    def _holder(self):
+        """None: no lock file; else a dict of its fields (pid, host, start; empty when unreadable)."""
+        try:
+            with open(self.path, "rb") as handle:
+                text = handle.read(256).decode("utf-8", "replace")
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            raise TensormassError(f"output folder {self.folder}: cannot read its lock {self.path}: "
+                                  f"{_reason(exc)}") from None
+        fields = dict(part.split("=", 1) for part in text.split() if "=" in part)
+        return fields
+
+    def _alive(self, holder: dict) -> bool:
+        """Whether the lock's process may still be running (unknown: yes, the safe answer)."""
+        try:
+            pid = int(holder.get("pid", ""))
+        except ValueError:
+            return True                           # being written right now, or not ours to judge
+        if holder.get("host") != _host():
+            return True                           # another machine's process: cannot be checked
+        if pid == os.getpid():
+            entry = _HELD.get(str(self.path.resolve()))
+            owner = entry[1]() if entry is not None else None
+            return owner is not None and owner is not self.owner
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            pass                                  # alive, another user's
+        except OSError:
+            return True
+        start = holder.get("start", "?")
+        now = _process_start(pid)
+        return not (start.isdigit() and now is not None and int(start) != now)
+
+    def _refuse(self, holder: dict):
+        pid = holder.get("pid") or "unknown"
+        host = holder.get("host")
+        where = f" on {host}" if host and host != _host() else ""
+        same = " (this process)" if pid == str(os.getpid()) else ""
+        return TensormassError(f"output folder {self.folder}: another tensormass run (pid {pid}{where}{same}) is "
+                               f"writing there; wait for it to end or choose another output folder (if no run is "
+                               f"using it, remove {self.path})")
+
+    def check(self) -> None:
+        """Refuse when a live run holds the folder; reads only."""
+        holder = self._holder()
+        if holder is not None and not self.held and self._alive(holder):
+            raise self._refuse(holder)
+
+    def acquire(self) -> None:
+        """Take the lock (the folder must exist); a stale lock is taken over."""
+        if self.held:
+            return
+        text = self.record().encode()
+        for _ in range(4):
+            try:
+                fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                holder = self._holder()
+                if holder is None:
+                    continue                      # released meanwhile: try again
+                if self._alive(holder):
+                    raise self._refuse(holder) from None
+                self._take_over(holder)
+                continue
+            except OSError as exc:
+                raise TensormassError(f"output folder {self.folder}: cannot create its lock {self.path}: "
+                                      f"{_reason(exc)}") from None
+            try:
+                os.write(fd, text)
+            finally:
+                os.close(fd)
+            self.held = True
+            key, token = str(self.path.resolve()), next(_TOKENS)
+            _HELD[key] = (token, weakref.ref(self.owner))
+            # released when the holder is dropped without close() (or at exit): no lock outlives its run
+            self._finalizer = weakref.finalize(self.owner, _unlock, key, token, str(self.path), text)
+            return
+        raise TensormassError(f"output folder {self.folder}: its lock {self.path} keeps changing hands; "
+                              "another run is starting there")
+
+    def _take_over(self, stale: dict) -> None:
+        """Move a stale lock aside, then delete it; a lock that turns out live (replaced by a new run
+        between the read and the move) is put back."""
+        aside = self.folder / f"{LOCK_NAME}.stale-{os.getpid()}"
+        try:
+            os.replace(self.path, aside)
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            raise TensormassError(f"output folder {self.folder}: cannot remove the stale lock {self.path} "
+                                  f"(pid {stale.get('pid')}, no longer running): {_reason(exc)}") from None
+        moved = FolderLock(self.folder, self.owner)
+        moved.path = aside
+        holder = moved._holder()
+        if holder is not None and holder != stale and self._alive(holder):
+            with contextlib.suppress(OSError):
+                os.link(aside, self.path)         # back where it was, unless a newer lock is there
+        _remove_quietly(aside)
+
+    def release(self) -> None:
+        if not self.held:
+            return
+        self.held = False
+        self._finalizer()
+
+
+def _unlock(key: str, token: int, path: str, text: bytes) -> None:
+    """Forget the lock taken with token, and remove its file while it still holds text (ours)."""
+    if _HELD.get(key, (None,))[0] == token:
+        del _HELD[key]
+    try:
+        with open(path, "rb") as handle:
+            ours = handle.read(256) == text
+    except OSError:
+        return
+    if ours:
+        _remove_quietly(path)
+
+
 # ============================================================================== the writer
 
 
@@ -292,10 +479,13 @@ class Writer:
         self.deformed = deformed
         self.overwrite = overwrite
         self.frames: list = []          # [(time, file name)] of finished frames
+        self._listed: set = set()       # their file names: a frame's bookkeeping never walks the list
         self.created_dir = False
         self.closed = False
         self.stopped = None             # (step, message) once mark_stopped() was called
         self.error = None               # the OutputError that ended the writing, if any
+        self.lock = FolderLock(self.out_dir, self)
+        self.keep_lock = False          # True: close() leaves the lock to release_lock() (RunFiles)
         self._prepared = False          # prepare() ran
         self._stale: list = []          # files of an earlier run, removed with the first frame
         self._lines: list = []          # [(file name or None, bytes)]: the .pvd between head and tail
@@ -343,6 +533,12 @@ class Writer:
         check_writable(self.out_dir, "output folder")
         if not self.out_dir.is_dir():
             return
+        self.lock.check()
+        self._scan()
+
+    def _scan(self) -> None:
+        """The files with this writer's names in the folder: stale (ours, removed with the first
+        frame) or foreign (refused unless overwrite)."""
         listed = self._listed_by_our_pvd()
         stale, foreign = [], []
         for entry in sorted(os.scandir(self.out_dir), key=lambda e: e.name):
@@ -386,6 +582,13 @@ class Writer:
         if not self._prepared:
             self.prepare()
         self._make_dir()
+        try:
+            self.lock.acquire()
+            self._scan()                          # as the folder is now that no other run can change it
+        except TensormassError:
+            self.lock.release()
+            self.discard()
+            raise
         for path in self._stale:
             try:
                 _remove(path)
@@ -418,7 +621,8 @@ class Writer:
         self._write_vtu(m, target)
         lines = [] if flag is None else [(None, xml_comment(f"health warning (step {int(step)}): {flag}"))]
         lines.append((target.name, f'<DataSet timestep="{time!r}" group="" part="0" file={quoteattr(target.name)}/>'))
-        relisted = any(name == target.name for _, name in self.frames)
+        name = target.name
+        relisted = name in self._listed
         try:
             self._add_to_pvd(lines)
         except BaseException as exc:              # also Ctrl-C: a rerun would take the frame for a stranger's
@@ -429,7 +633,10 @@ class Writer:
                 raise
             kept = f"; the {len(self.frames)} frame(s) written before stay listed in it" if self.frames else ""
             raise self._fail(f"cannot write {self.pvd_path}: {_reason(exc)}{kept}") from None
-        self.frames = [f for f in self.frames if f[1] != target.name] + [(time, target.name)]
+        if relisted:                              # rare (a step written twice): the one O(frames) path
+            self.frames[:] = [f for f in self.frames if f[1] != name]
+        self.frames.append((time, name))
+        self._listed.add(name)
         return target
 
     def mark_stopped(self, step, message) -> None:
@@ -445,12 +652,20 @@ class Writer:
             pass
 
     def close(self) -> None:
-        """Finish (idempotent): the .pvd is complete after every frame, nothing is left to write."""
+        """Finish (idempotent): the .pvd is complete after every frame, nothing is left to write;
+        the folder's lock is released (unless keep_lock: then release_lock() does it)."""
         self.closed = True
+        if not self.keep_lock:
+            self.lock.release()
+
+    def release_lock(self) -> None:
+        """Let other runs write into the folder (idempotent)."""
+        self.lock.release()
 
     def discard(self) -> None:
         """After a failure: remove the output folder if this writer created it and it is empty."""
         if self.created_dir and not self.frames:
+            self.lock.release()
             try:
                 self.out_dir.rmdir()
                 self.created_dir = False
@@ -542,7 +757,7 @@ class Writer:
         closing tags are not where this writer left them (the file was changed under it)."""
         encoded = [(name, f"    {text}\n".encode("utf-8")) for name, text in lines]
         names = {name for name, _ in encoded if name is not None}
-        if names & {f for _, f in self.frames}:
+        if names & self._listed:
             kept = [(n, b) for n, b in self._lines if n not in names] + encoded
             self._write_whole_pvd(kept)
         elif not (self._pvd_written and self._append_pvd(b"".join(b for _, b in encoded))):

@@ -13,12 +13,16 @@ history beside it (F with .csv). On request ([output] picture / plot, run --pict
 ``<field>.png``, the deformed body coloured by a field at the end of the run (runtime.picture;
 not drawn for a run that stopped: its last state is not a result), and ``summary.png``, the
 history curves (runtime.curves; the same picture as `tensormass plot summary.json`).
-A run that ends before its first frame leaves no folder behind.
+A run that ends before its first frame leaves no folder behind. The folder is locked from the
+first frame until the summary is written (runtime.output.FolderLock): a second run into the
+same folder meanwhile is refused, naming the first one's pid.
 
 Everything that can be refused is refused in prepare(), before the model is built: an unwritable
 folder, frames or a .pvd that an earlier run of ours did not write, a summary path that holds
 anything but one of our summaries, a history/picture file in a folder whose summary.json is not
-ours (all unless overwrite), a picture or plot asked without an output folder.
+ours (all unless overwrite), a picture or plot asked without an output folder, a folder another
+run is writing into, and two files of this run at one path (--json s.csv would be its own
+history, --json onto the folder's history or a picture).
 """
 from __future__ import annotations
 
@@ -53,6 +57,8 @@ class RunFiles:
         self.overwrite = overwrite
         self.mesh = scene.load_mesh()
         self.writer = Writer(self.out_dir, self.mesh, overwrite=overwrite) if self.out_dir is not None else None
+        if self.writer is not None:
+            self.writer.keep_lock = True         # the folder stays locked until finish() wrote the summary
         self.summary_path = None if self.out_dir is None else self.out_dir / SUMMARY_NAME
         self.picture = scene.output.picture              # a field name, or None
         self.plot = scene.output.plot
@@ -66,6 +72,7 @@ class RunFiles:
             return
         scene = self.scene
         self.json_path = check_summary_path(self.json_path, scene_file=scene.source, writer=self.writer)
+        self._check_collisions()
         if self.json_path is not None:
             self._check_beside(self.json_path, [self.json_path.with_suffix(".csv")])
         if (self.picture or self.plot) and self.out_dir is None:
@@ -89,6 +96,26 @@ class RunFiles:
     def _extras(self) -> list:
         """The files beside the folder's summary: its history, and the pictures asked for."""
         return [p for p in (self.summary_path.with_suffix(".csv"), self.picture_path, self.plot_path) if p]
+
+    def _check_collisions(self) -> None:
+        """No two files of this run at one path; --json may name the folder's own summary.json
+        (written once), nothing else of the folder's."""
+        path = self.json_path
+        if path is None:
+            return
+        history = path.with_suffix(".csv")
+        if path.suffix.lower() == ".csv":
+            raise TensormassError(f"--json {path}: the summary's per-step history is written beside it under "
+                                  f"the same name with .csv ({history.name}), which is the summary itself; give "
+                                  f"the summary another name (e.g. {path.with_suffix('.json').name})")
+        if self.out_dir is None or _same_path(path, self.summary_path):
+            return
+        for mine in (path, history):
+            for theirs in self._extras():
+                if _same_path(mine, theirs):
+                    what = "the summary" if mine == path else f"its history {history}"
+                    raise TensormassError(f"--json {path}: {what} would be written over {theirs}, a file of "
+                                          "this run in the output folder; give the summary another name")
 
     def _check_folder_extras(self) -> None:
         self._check_beside(self.summary_path, self._extras())
@@ -120,6 +147,7 @@ class RunFiles:
         if self.writer is not None:
             self.writer.close()
             self.writer.discard()
+            self.writer.release_lock()
 
     def finish(self, summary, stopped=None, sim=None) -> dict:
         """Close the frames, write the summary (JSON, and its history as CSV) where asked, and the
@@ -127,7 +155,15 @@ class RunFiles:
 
         stopped: the RunStopped / RunInterrupted that ended the run, None for a result we stand
         behind. Raises the writer's OutputError when a frame could not be written (disk full).
+        The folder's lock is released at the end, whatever happens.
         """
+        try:
+            return self._finish(summary, stopped, sim)
+        finally:
+            if self.writer is not None:
+                self.writer.release_lock()
+
+    def _finish(self, summary, stopped, sim) -> dict:
         writer = self.writer
         if writer is not None:
             writer.close()

@@ -258,6 +258,29 @@ def test_json_replaces_an_earlier_summary(tmp_path, capsys):
     assert output.is_summary_file(js)
 
 
+@pytest.mark.parametrize("target, extra, reason", [
+    ("s.csv", (), r"the same name with \.csv"),                  # its history is s.csv: the summary lost
+    ("S.CSV", (), r"the same name with \.csv"),                  # the same file where names ignore case
+    ("out/von_mises.png", ("--picture",), r"written over .*von_mises\.png"),
+    ("out/summary.png", ("--plot",), r"written over .*summary\.png"),
+])
+def test_json_never_collides_with_the_runs_other_files(tmp_path, capsys, monkeypatch, target, extra, reason):
+    no_simulation(monkeypatch)
+    scene = scene_file(tmp_path)
+    (tmp_path / "out").mkdir()
+    code, _, err = run(capsys, "run", scene, "--out", tmp_path / "out", "--json", tmp_path / target, *extra)
+    assert code == 2 and re.search(reason, err) and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["bar.toml", "out"]
+
+
+def test_json_and_its_history_both_survive_the_run(tmp_path, capsys):
+    scene = scene_file(tmp_path)
+    code, _, err = run(capsys, "run", scene, "--out", tmp_path / "out", "--json", tmp_path / "s", "--quiet")
+    assert code == 0, err
+    assert output.is_summary_file(tmp_path / "s")                         # no suffix: history s.csv beside it
+    assert (tmp_path / "s.csv").read_text().startswith("step")
+
+
 @pytest.mark.parametrize("which", ["json", "out"])
 def test_read_only_folders_refused_before_the_run(tmp_path, capsys, monkeypatch, which):
     scene = scene_file(tmp_path)
@@ -365,6 +388,7 @@ def test_pvd_append_that_fails_half_way_leaves_a_valid_file(tmp_path, monkeypatc
     with pytest.raises(output.OutputError, match=r"frame\.pvd: No space left on device"):
         w.write_frame(1, 0.1, None, u)
     assert pvd_files(tmp_path / "frame.pvd") == ["frame_000000.vtu"]
+    w.close()                                      # the folder's lock goes with the writer
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frame.pvd", "frame_000000.vtu"]
 
 
