@@ -26,6 +26,17 @@ selection (`model.fixed_owner`, what runtime.regions.prescribed_values returned)
 [[fixed]] selects nodes (boxes, regions), motions follow.  Dynamic integrators that move fixed
 dofs by a velocity use `boundary_velocity(u, s1, h)`, the finite difference over the step,
 so the fixed nodes land exactly on u(X, s1).
+
+Static runs turn a rotation by at most MAX_STATIC_ROTATION_STEP (45 degrees) per load step, or
+are refused naming the steps they need.  Equilibrium under a turned clamp depends on the path, not
+only on where the clamp ends: a bar twisted by a full turn has its end face back where it started,
+yet holds a full turn of twist; only a path of small increments tells the solver which of these
+equilibria the motion means (from the previous one, a step of 180 degrees or more is closer to
+the equilibrium of a smaller or opposite twist, and Newton lands there without a message).
+Measured on a stable neo-Hookean bar (1 x 0.1 x 0.1 m, 8 x 2 x 2 hexahedra) turned 360 degrees:
+steps of 7.5, 30 and 45 degrees give the same twisted equilibrium (mid-length section at 180
+degrees); steps of 60 or 90 degrees fail in Newton; steps of 180 or 360 degrees return the
+untwisted bar with status ok.
 """
 from __future__ import annotations
 
@@ -38,11 +49,13 @@ import numpy as np
 from .errors import SceneError, TensormassError
 
 __all__ = ["Amplitude", "Rotation", "Motion", "BUILTIN_AMPLITUDES", "parse_amplitude", "parse_rotation",
-           "rotation_matrix", "rigid_displacement", "check_amplitude_use"]
+           "rotation_matrix", "rigid_displacement", "check_amplitude_use", "MAX_STATIC_ROTATION_STEP"]
 
 ABSCISSAE = ("time", "factor")
 _AMPLITUDE_KEYS = ("name", "time", "factor", "value")
 _ROTATION_KEYS = ("axis", "point", "angle")
+# degrees a prescribed rotation may turn in one static load step (see the module doc)
+MAX_STATIC_ROTATION_STEP = 45.0
 
 
 @dataclass(frozen=True)
@@ -225,6 +238,8 @@ class Motion:
         self.moving = any(_moves(f) or getattr(f, "amplitude", None) is not None for f in self.fixed)
         self._groups = self._fixed_groups() if self.moving else []
         self._loads = self._load_groups(model.loads)
+        if self.static:
+            self._check_static_rotation_steps()
 
     @property
     def static(self) -> bool:
@@ -254,6 +269,65 @@ class Motion:
             return min(max(fraction, 0.0), 1.0)
         amp = self._amplitude(name, "amplitude")
         return amp.value(fraction * self.duration, fraction)
+
+    def _factors(self, name: str | None, fractions: np.ndarray) -> np.ndarray:
+        """factor(name, s) at many run fractions (fixed dofs: the clamped ramp by default)."""
+        if name is None:
+            return np.clip(fractions, 0.0, 1.0)
+        amp = self._amplitude(name, "amplitude")
+        at = fractions * self.duration if amp.abscissa == "time" else fractions
+        return np.interp(at, amp.x, amp.y)
+
+    def _check_static_rotation_steps(self) -> None:
+        """Refuse a static run whose load steps turn a prescribed rotation by more than
+        MAX_STATIC_ROTATION_STEP degrees (from the rest state to the first step, then step to step)."""
+        steps = int(self.model.solver.steps)
+        limit = MAX_STATIC_ROTATION_STEP
+        for i, f in enumerate(self.fixed):
+            rot = getattr(f, "rotation", None)
+            if rot is None or not rot.angle:
+                continue
+            name, angle = getattr(f, "amplitude", None), abs(float(rot.angle))
+            turn = self._largest_turn(name, angle, steps)
+            if turn <= limit * (1 + 1e-12):
+                continue
+            head = (f"fixed[{i}].rotation: a static run turns a prescribed rotation by at most {limit:g} degrees "
+                    f"per load step (equilibrium under a turned clamp depends on the path: a clamp turned by "
+                    f"360 degrees in one step is back where it started and the bar comes out untwisted); "
+                    f"angle = {rot.angle:g} degrees")
+            first = abs(float(self._factors(name, np.array([0.0]))[0])) * angle
+            if first > limit:
+                raise TensormassError(f"{head}, and its amplitude {name!r} is already "
+                                      f"{first / angle:g} at the start: the first step turns it by {first:g} "
+                                      f"degrees whatever the number of steps; start the amplitude at 0")
+            need = self._steps_needed(name, angle, steps)
+            raise TensormassError(f"{head} over {steps} load step(s) is up to {turn:g} degrees in one "
+                                  f"step: use solver.steps >= {need}"
+                                  + ("" if name is None else f" (with amplitude {name!r})")
+                                  + ", or a dynamic run")
+
+    def _largest_turn(self, name, angle: float, steps: int) -> float:
+        """The largest rotation (degrees) of one load step of a static run of `steps` steps."""
+        a = np.concatenate([[0.0], self._factors(name, np.arange(1, steps + 1) / steps)])
+        return float(np.abs(np.diff(a)).max()) * angle
+
+    def _steps_needed(self, name, angle: float, steps: int) -> int:
+        """The fewest load steps (> steps) whose every step turns at most the limit: from the
+        amplitude's steepest slope, then checked (and raised) against the steps themselves."""
+        limit = MAX_STATIC_ROTATION_STEP
+        if name is None:
+            slope = 1.0
+        else:
+            amp = self._amplitude(name, "amplitude")
+            x = np.asarray(amp.x, float) / (self.duration if amp.abscissa == "time" else 1.0)
+            y = np.asarray(amp.y, float)
+            slope = float(np.max(np.abs(np.diff(y)) / np.diff(x))) if len(x) > 1 else 0.0
+        need = max(steps + 1, math.ceil(slope * angle / limit * (1 - 1e-12)))
+        for _ in range(64):
+            if need > 10_000_000 or self._largest_turn(name, angle, need) <= limit * (1 + 1e-12):
+                return need
+            need = math.ceil(need * 1.25)
+        return need
 
     # -- prescribed displacements -----------------------------------------------------------------
     def _fixed_groups(self) -> list:

@@ -408,3 +408,48 @@ def test_the_tool_press_example_follows_its_path():
     assert np.allclose(path[1.0], [0.0025, 0.0, -0.005], atol=1e-15)
     assert np.allclose(path[1.2], [0.0, 0.0, -0.005], atol=1e-15)
     assert np.allclose(path[1.8], [0.0, 0.0, 0.0], atol=1e-15)
+
+
+# ============================================================================== large static rotations
+
+
+def _static_twist(angle, steps, amplitude=None, amplitudes=None):
+    data = bar(steps=steps, angle=angle, amplitude=amplitude)
+    if amplitudes:
+        data["amplitude"] = amplitudes
+    return Scene.from_dict(copy.deepcopy(data))
+
+
+@pytest.mark.parametrize("angle, steps, need", [(1e6, 12, 22223), (360.0, 2, 8), (360.0, 1, 8), (-100.0, 2, 3)])
+def test_a_static_step_turning_a_clamp_more_than_45_degrees_is_refused_naming_the_steps(angle, steps, need):
+    """On main a static 1e6 degree turn in 12 steps returned the equilibrium of a -80 degree twist, and
+    360 degrees in 1 or 2 steps the untwisted bar, all with status ok."""
+    with pytest.raises(TensormassError, match=rf"fixed\[1\]\.rotation: a static run turns a prescribed rotation by at "
+                                              rf"most 45 degrees per load step .* use solver\.steps >= {need}\b"):
+        Model.from_scene(_static_twist(angle, steps))
+
+
+def test_amplitudes_count_in_the_turn_of_each_static_step():
+    steep = [{"name": "steep", "factor": [0.0, 0.5, 0.6, 1.0], "value": [0.0, 0.0, 1.0, 1.0]}]
+    with pytest.raises(TensormassError, match=r"up to 90 degrees in one step: use solver\.steps >= 20 "
+                                              r"\(with amplitude 'steep'\)"):
+        Model.from_scene(_static_twist(90.0, 10, "steep", steep))
+    Model.from_scene(_static_twist(90.0, 20, "steep", steep))
+    held = [{"name": "held", "factor": [0.0, 1.0], "value": [1.0, 1.0]}]
+    with pytest.raises(TensormassError, match=r"already 1 at the start.*start the amplitude at 0"):
+        Model.from_scene(_static_twist(90.0, 50, "held", held))
+    Model.from_scene(_static_twist(30.0, 1, "held", held))       # within the limit in one step
+
+
+def test_a_full_turn_in_steps_of_45_degrees_keeps_its_twist():
+    """360 degrees in 8 static steps: the mid-length section turns 180 degrees (the twisted equilibrium,
+    the same as with steps of 7.5 degrees), not the untwisted bar that one 360 degree step gives."""
+    sim = Simulation(_static_twist(360.0, 8), output=False)
+    summary = sim.run()
+    assert summary.status == "ok", summary.message
+    X = sim.model.mesh.points
+    mid = np.flatnonzero(np.isclose(X[:, 0], 0.5) & np.isclose(X[:, 1], W) & np.isclose(X[:, 2], W))
+    x = (X[mid] + sim.displacement[mid])[0] - P
+    turned = math.degrees(math.atan2(x[2], x[1]) - math.atan2(W - P[2], W - P[1])) % 360.0
+    assert turned == pytest.approx(180.0, abs=1e-3)              # measured: 180.0000003 (0 for one step)
+    assert summary.energy > 1.0                                   # measured: 134.5 J, twisted
