@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import inspect
 from dataclasses import dataclass
+from functools import lru_cache
 from types import SimpleNamespace
 
 import sympy as sp
@@ -101,6 +102,7 @@ def resolve_rule(element_name: str, law, quadrature: str) -> QuadratureRule:
     return rule_for_degree(element_name, degree)
 
 
+@lru_cache(maxsize=None)       # laws are immutable (hashed by identity); scene validation asks per material
 def law_degree(law) -> int | None:
     """Total degree of W in the entries of F, or None when W is not polynomial."""
     d = law_derivatives(law, 3)
