@@ -83,6 +83,14 @@ def _lies_on_a_cell_without_being_its_node(mesh, rows) -> np.ndarray:
     inc = incidence(mesh)
     which, cells, nodes = cells_around(mesh, inc, chain_node)
     pair_row, pair_cell = chain_row[which], cells
+    # a cell's closure lies in its corners' bounding box (a cell's map is a convex combination of its
+    # nodes): pairs whose node is outside it are dropped before the exact test
+    X = mesh.points[np.where(nodes >= 0, nodes, nodes[:, :1])]
+    lo, hi = X.min(axis=1), X.max(axis=1)
+    tol = 1e-9 * (hi - lo).max(axis=1, keepdims=True)
+    x = mesh.points[rows[pair_row, 0]]
+    near = ((x >= lo - tol) & (x <= hi + tol)).all(axis=1)
+    pair_row, pair_cell, nodes = pair_row[near], pair_cell[near], nodes[near]
     key = np.unique(pair_row * (mesh.n_cells + 1) + pair_cell, return_index=True)[1]
     pair_row, pair_cell, pair_nodes = pair_row[key], pair_cell[key], nodes[key]
     # a cell holding the node itself is not one it hangs on
