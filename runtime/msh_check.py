@@ -12,8 +12,12 @@ of MSH 2.2 and 4.1 files, ASCII and binary, and refuses a file whose content dis
 - `$Nodes` / `$Elements`: the declared counts (per block in 4.1, and the totals) are what follows,
   every node line has its coordinates, every element line the node count of its type, and every
   node an element lists is defined in `$Nodes`;
+- `$PhysicalNames` has as many names as it declares; MSH 4.1's `$Entities` as many points, curves,
+  surfaces and volumes, each line with its counts of physical tags and bounding entities, and the
+  node and element blocks refer to entities it defines;
 - binary files are walked record by record with the same counts (ints of 4 bytes, MSH 4.1's
-  size_t of the header's data size); their other sections are only checked to be closed.
+  size_t of the header's data size; a count larger than the bytes left is refused before anything
+  is allocated); their other sections are only checked to be closed.
 
 Other versions (MSH 3, 4.0) are left to meshio.  Messages name the section, the block and the line
 (ASCII) or byte offset (binary), e.g. "$Nodes block 2: expected 40 nodes, found 38".
@@ -114,6 +118,14 @@ def _ascii_sections(text: str, first_line: int):
     return out
 
 
+def _count(line: str, where: str) -> int:
+    """The count a line starts with."""
+    f = line.split()
+    if not f:
+        raise _Broken(f"{where}: expected a count, found an empty line")
+    return _ints(f[:1], where)[0]
+
+
 def _ints(tokens, where: str) -> list:
     try:
         return [int(t) for t in tokens]
@@ -141,10 +153,11 @@ def _numbers(lines, start: int, width: int, what: str, where: str) -> np.ndarray
 def _ascii_v2(data: bytes, body: int) -> None:
     first_line = data[:body].count(b"\n") + 1
     sections = _ascii_sections(data[body:].decode("latin-1"), first_line)
+    _physical_names(sections)
     start, lines = sections["Nodes"]
     if not lines:
         raise _Broken("$Nodes: no node count")
-    (n,) = _ints(lines[0].split()[:1], f"$Nodes, line {start}")
+    n = _count(lines[0], f"$Nodes, line {start}")
     rows = lines[1:]
     if len(rows) != n:
         raise _Broken(f"$Nodes: expected {n} nodes, found {len(rows)} lines (line {start})")
@@ -154,7 +167,7 @@ def _ascii_v2(data: bytes, body: int) -> None:
     start, lines = sections["Elements"]
     if not lines:
         raise _Broken("$Elements: no element count")
-    (n,) = _ints(lines[0].split()[:1], f"$Elements, line {start}")
+    n = _count(lines[0], f"$Elements, line {start}")
     rows = lines[1:]
     if len(rows) != n:
         raise _Broken(f"$Elements: expected {n} elements, found {len(rows)} lines (line {start})")
@@ -178,8 +191,58 @@ def _ascii_v2(data: bytes, body: int) -> None:
 def _ascii_v41(data: bytes, body: int, size_t: int) -> None:
     first_line = data[:body].count(b"\n") + 1
     sections = _ascii_sections(data[body:].decode("latin-1"), first_line)
-    tags = _ascii_v41_nodes(*sections["Nodes"])
-    _ascii_v41_elements(*sections["Elements"], tags)
+    _physical_names(sections)
+    entities = _ascii_v41_entities(*sections["Entities"]) if "Entities" in sections else None
+    tags = _ascii_v41_nodes(*sections["Nodes"], entities)
+    _ascii_v41_elements(*sections["Elements"], tags, entities)
+
+
+def _physical_names(sections) -> None:
+    """$PhysicalNames: a count, then that many lines 'dim tag "name"'."""
+    if "PhysicalNames" not in sections:
+        return
+    start, lines = sections["PhysicalNames"]
+    if not lines:
+        raise _Broken("$PhysicalNames: no count")
+    n = _count(lines[0], f"$PhysicalNames, line {start}")
+    if len(lines) - 1 != n:
+        raise _Broken(f"$PhysicalNames: expected {n} names, found {len(lines) - 1} lines (line {start})")
+    for k, line in enumerate(lines[1:]):
+        f = line.split(maxsplit=2)
+        where = f"$PhysicalNames, line {start + 1 + k}"
+        if len(f) != 3 or not f[2].startswith('"') or not f[2].rstrip().endswith('"') or len(f[2].strip()) < 2:
+            raise _Broken(f"{where}: expected 'dimension tag \"name\"', found {line.strip()[:60]!r}")
+        _ints(f[:2], where)
+
+
+def _ascii_v41_entities(start, lines) -> set:
+    """$Entities: the declared points, curves, surfaces and volumes, each line complete; the set of
+    (dimension, tag) it defines."""
+    counts = _header(lines, start, "$Entities", ("numPoints", "numCurves", "numSurfaces", "numVolumes"))
+    names = ("point", "curve", "surface", "volume")
+    at, out = 1, set()
+    for dim, n in enumerate(counts):
+        for j in range(n):
+            where = f"$Entities, line {start + at}"
+            if at >= len(lines):
+                raise _Broken(f"$Entities: expected {n} {names[dim]} lines, found {j} (the section ends)")
+            f = lines[at].split()
+            lead = 4 if dim == 0 else 7                       # tag and its point or bounding box
+            ok = len(f) > lead and f[lead].isdigit() and len(f) >= lead + 1 + int(f[lead])
+            if ok and dim > 0:
+                b = lead + 1 + int(f[lead])
+                ok = len(f) > b and f[b].isdigit() and len(f) == b + 1 + int(f[b])
+            elif ok:
+                ok = len(f) == lead + 1 + int(f[lead])
+            if not ok:
+                raise _Broken(f"{where}: {names[dim]} {j + 1} of {n}: its fields do not match its counts of "
+                              f"physical tags{'' if dim == 0 else ' and bounding entities'} (found "
+                              f"{lines[at].strip()[:60]!r})")
+            out.add((dim, _ints(f[:1], where)[0]))
+            at += 1
+    if at < len(lines):
+        raise _Broken(f"$Entities: more lines than the {sum(counts)} declared entities (line {start + at})")
+    return out
 
 
 def _header(lines, start, section, names):
@@ -200,7 +263,12 @@ def _run(split_rows, at: int, width, limit: int) -> int:
     return k
 
 
-def _ascii_v41_nodes(start, lines):
+def _known_entity(entities, dim, tag, where) -> None:
+    if entities is not None and (dim, tag) not in entities:
+        raise _Broken(f"{where}: entity dimension {dim}, tag {tag} is not in $Entities")
+
+
+def _ascii_v41_nodes(start, lines, entities=None):
     n_blocks, n_nodes, _, _ = _header(lines, start, "$Nodes", ("numEntityBlocks", "numNodes", "minNodeTag",
                                                                "maxNodeTag"))
     rows = [ln.split() for ln in lines]
@@ -214,6 +282,7 @@ def _ascii_v41_nodes(start, lines):
                                            "entityDim entityTag parametric numNodesInBlock")
         if param not in (0, 1):
             _bad_block_header(where, start + at, lines[at], "entityDim entityTag parametric numNodesInBlock")
+        _known_entity(entities, dim, ent, f"{where}, line {start + at}")
         at += 1
         k = _run(rows, at, 1, n)
         if k < n:
@@ -238,7 +307,7 @@ def _ascii_v41_nodes(start, lines):
     return tags
 
 
-def _ascii_v41_elements(start, lines, node_tags):
+def _ascii_v41_elements(start, lines, node_tags, entities=None):
     n_blocks, n_elements, _, _ = _header(lines, start, "$Elements", ("numEntityBlocks", "numElements",
                                                                      "minElementTag", "maxElementTag"))
     rows = [ln.split() for ln in lines]
@@ -252,6 +321,7 @@ def _ascii_v41_elements(start, lines, node_tags):
                                            "entityDim entityTag elementType numElementsInBlock")
         if etype not in types:
             _bad_block_header(where, start + at, lines[at], "entityDim entityTag elementType numElementsInBlock")
+        _known_entity(entities, dim, ent, f"{where}, line {start + at}")
         name, nn = types[etype]
         at += 1
         k = _run(rows, at, 1 + nn, n)
@@ -381,13 +451,13 @@ def _binary_v2(data: bytes, body: int) -> None:
     state = {}
 
     def nodes(r):
-        (n,) = _ints(r.line("$Nodes").split()[:1], "$Nodes")
+        n = _count(r.line("$Nodes"), "$Nodes")
         rec = r.take(np.dtype([("id", "<i4"), ("x", "<f8", 3)]), n, f"$Nodes ({n} nodes declared)")
         state["tags"] = rec["id"].astype(np.int64)
         _unique_tags(state["tags"], "$Nodes")
 
     def elements(r):
-        (n,) = _ints(r.line("$Elements").split()[:1], "$Elements")
+        n = _count(r.line("$Elements"), "$Elements")
         types, done, refs, b = _gmsh_types(), 0, [], 0
         while done < n:
             b += 1
@@ -412,6 +482,20 @@ def _binary_v41(data: bytes, body: int, size_t: int) -> None:
     if st is None:
         raise _Broken(f"$MeshFormat: data size {size_t} (size_t) is neither 4 nor 8")
     state = {}
+
+    def entities(r):
+        counts = [int(v) for v in r.take(st, 4, "$Entities header")]
+        names = ("point", "curve", "surface", "volume")
+        for dim, n in enumerate(counts):
+            for j in range(1, n + 1):
+                where = f"$Entities {names[dim]} {j} of {n}"
+                r.take("<i4", 1, where)
+                r.take("<f8", 3 if dim == 0 else 6, where)
+                (k,) = (int(v) for v in r.take(st, 1, where))
+                r.take("<i4", k, f"{where}: {k} physical tags")
+                if dim:
+                    (k,) = (int(v) for v in r.take(st, 1, where))
+                    r.take("<i4", k, f"{where}: {k} bounding entities")
 
     def nodes(r):
         n_blocks, n_nodes, _, _ = (int(v) for v in r.take(st, 4, "$Nodes header"))
@@ -449,5 +533,5 @@ def _binary_v41(data: bytes, body: int, size_t: int) -> None:
             raise _Broken(f"$Elements: the header declares {n_elements} elements, the blocks hold {total}")
         state["refs"] = np.concatenate(refs) if refs else np.zeros(0, np.int64)
 
-    _binary_sections(data, body, {"Nodes": nodes, "Elements": elements})
+    _binary_sections(data, body, {"Entities": entities, "Nodes": nodes, "Elements": elements})
     _defined(state["refs"], state["tags"], "$Elements")
