@@ -83,6 +83,11 @@ ASCII = {
     "v41 element short of a node": ("tetra_v41.msh", _set(lambda L: _at(L, "$Elements", 3),
                                                           lambda s: " ".join(s.split()[:-1])),
                                     r"\$Elements block 1 \(triangle, 3 nodes each\): expected 8 elements, found 0"),
+    "v41 $PhysicalNames count": ("tetra_v41.msh", _set(lambda L: _at(L, "$PhysicalNames"), lambda s: "3"),
+                                 r"\$PhysicalNames: expected 3 names, found 2 lines"),
+    "v41 $Entities line short": ("tetra_v41.msh", _set(lambda L: _at(L, "$Entities", 10),
+                                                       lambda s: " ".join(s.split()[:-1])),
+                                 r"\$Entities, line 19: curve \d+ of \d+: its fields do not match its counts"),
     "v41 truncated": ("tetra_v41.msh", lambda L: L.__delitem__(slice(len(L) * 4 // 5, None)),
                       r"\$Elements \(line 111\) is never closed: the file ends inside it \(truncated\?\)"),
 }
