@@ -329,7 +329,10 @@ def _ascii_v41_elements(start, lines, node_tags, entities=None):
             found = f"line {start + at + k} has {len(rows[at + k]) - 1} nodes" if at + k < len(rows) else \
                 "the section ends"
             raise _Broken(f"{where} ({name}, {nn} nodes each): expected {n} elements, found {k} ({found})")
-        block = np.asarray(_ints([t for r in rows[at:at + n] for t in r], where), np.int64).reshape(n, 1 + nn)
+        try:
+            block = np.array(rows[at:at + n], dtype=np.int64).reshape(n, 1 + nn)
+        except ValueError:
+            block = np.asarray(_ints([t for r in rows[at:at + n] for t in r], where), np.int64).reshape(n, 1 + nn)
         refs.append(block[:, 1:].ravel())
         at += n
         total += n
