@@ -12,7 +12,10 @@ formulas and the finest tetra10 run), adaptive_beam (hooke / stvk / adaptive hoo
 rotation cantilever), refinement (R_S refinement against uniform refinement; see adaptive.py), cook
 (Cook's membrane: locking of 2D elements and the locking-free formulations; cook.py) and block (a
 nearly incompressible cube of tetrahedra; block.py) and hybmss (the thesis' chapter-7 tables: MSS-Baudet,
-HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py).
+HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py), cylinder (a thick-walled cylinder
+under internal pressure in plane strain, prism and hexahedral layers against Lame; cylinder.py) and
+incompressible (Newton iterations at nu = 0.499 on the organ and the cantilever, with FElupe's
+plain-Newton counts where it is installed; incompressible.py).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
 `case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
 thesis_value (MODEL_COLUMNS);
@@ -76,6 +79,8 @@ from ...runtime.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
+from .cylinder import cylinder
+from .incompressible import incompressible
 from .block import block
 from .hybmss import hybmss
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
@@ -157,7 +162,8 @@ def _cantilever_reference(ref_cells) -> tuple:
 
 def _benchmark_task(name, quick, sweep) -> tuple:
     """One of the other built-in benchmarks as a task: (its result dict, its progress lines)."""
-    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss}
+    BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss, "cylinder": cylinder,
+                  "incompressible": incompressible}
     lines = []
     return BENCHMARKS[name](quick, lines.append, sweep), lines
 
@@ -539,7 +545,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement", "cook", "block", "hybmss")
+                   "adaptive_beam", "refinement", "cook", "block", "hybmss", "cylinder", "incompressible")
 
 
 def _resolve(benchmarks) -> list:
