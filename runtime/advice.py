@@ -84,7 +84,7 @@ def scene_advice(scene, mesh=None) -> list:
     """Advice lines for a scene on its mesh (default: scene.load_mesh()); [] when there is none."""
     mesh = scene.load_mesh() if mesh is None else mesh
     backend = getattr(scene.solver, "backend", "numba")
-    advice = []
+    advice = list(getattr(mesh, "notes", ()))        # what reading the mesh changed (shell windings)
     for i, element_types in sorted(_modelled_elements(scene, mesh).items()):
         material, key = scene.materials[i], f"material[{i}]"
         if laws.is_discrete(material.law):

@@ -92,10 +92,12 @@ def shell_mesh(spec):
         points, triangles = surfaces.plate(spec.size[0], spec.size[1], spec.cells[0], spec.cells[1])
     elif spec.generate == "sphere":
         points, triangles = surfaces.icosphere(spec.radius, spec.subdivisions)
-    else:
-        points, triangles = _file_triangles(spec.file)
+    else:       # windings made to agree across shared edges; the notes say what was turned
+        points, triangles, notes = surfaces.read_shell_triangles(spec.file)
     points = np.asarray(points, float) + np.asarray(spec.origin, float)[:3] if spec.file is None else points
-    return _mesh.Mesh(points, [_mesh.CellBlock("shell", np.asarray(triangles, dtype=np.int64))])
+    mesh = _mesh.Mesh(points, [_mesh.CellBlock("shell", np.asarray(triangles, dtype=np.int64))])
+    mesh.notes = [f"mesh.file: {note}" for note in notes] if spec.file is not None else []
+    return mesh
 
 
 def ball_mesh(spec):
@@ -105,33 +107,6 @@ def ball_mesh(spec):
     points = points + np.asarray(spec.origin, float)[:3]
     check_coordinates(points)
     return _mesh.Mesh(points, [_mesh.CellBlock("tetra", tetra)])
-
-
-def _file_triangles(path):
-    """(points (n, 3), triangles) of a surface mesh file: its triangle cells, renumbered."""
-    import meshio
-    try:
-        m = meshio.read(path)
-    except Exception as exc:
-        raise MeshError(f"could not read mesh {path}: {type(exc).__name__}: {exc}") from None
-    blocks = [np.asarray(cb.data, dtype=np.int64) for cb in m.cells if cb.type == "triangle"]
-    # curves and points (a gmsh file's boundary entities) are left out; surface cells other than
-    # 3-node triangles, and volume cells, are refused by name
-    other = sorted({cb.type for cb in m.cells if cb.type != "triangle"
-                    and _mesh._topological_dim(cb.type) not in (0, 1)})
-    if other:
-        hint = " (shells are linear triangles: mesh with element order 1)" if "triangle6" in other else \
-            " (remove them or mesh the surface alone)"
-        raise MeshError(f"{path}: element = \"shell\" takes 3-node triangle cells only; the file also has "
-                        f"{', '.join(other)}{hint}")
-    if not blocks:
-        raise MeshError(f"{path}: element = \"shell\" needs triangle cells; the file has none")
-    triangles = np.vstack(blocks)
-    points = np.asarray(m.points, dtype=np.float64)
-    if points.shape[1] == 2:
-        points = np.column_stack([points, np.zeros(len(points))])
-    used, inverse = np.unique(triangles, return_inverse=True)
-    return points[used], inverse.reshape(triangles.shape)
 
 
 def build_mesh(spec):
