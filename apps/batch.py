@@ -18,6 +18,21 @@ worker processes (BLAS / OpenMP / numba at one thread each: set in the workers' 
 before they start, and again by every task) or an existing cluster (``--scheduler``). The
 reports (apps/reports accuracy and stability) map their sweep cases through the same function.
 
+Before the study: the table's path is checked (``check_table_path``: not a folder, not an input
+scene, not a file that tensormass batch did not write, in a folder that can be written; the
+same rules as ``run --json``), every task's resources are estimated (runtime.resources) and the
+study's cost printed (tasks, peak memory and stepping time per task, in all), and the local
+workers are capped at the number of tasks and at what the memory allows (each worker gets the
+largest task's estimate x MEMORY_MARGIN): a message says so when they are.
+
+During the study each finished row is appended to ``<out>.partial`` (JSON lines: a header line
+with the format, then one row per line in the order the tasks finished, flushed per row), so a
+study that is interrupted or dies keeps what it computed. At the end the table is written in task
+order to a temporary name and renamed into place, and the partial file removed. Ctrl-C stops the
+study: exit 130 with one line naming the partial file (no worker traceback: the workers start
+with SIGINT blocked, so only this process sees it, and the cluster is closed, client first, with
+its logging silenced and a second Ctrl-C held until it is down).
+
 Kernel caches: the first task of a process that needs a kernel loads (generates, compiles,
 numba-compiles) it under a file lock per kernel in the cache folder (``kernel_locks``), so
 concurrent workers generate and compile a kernel once and the others wait, then load it.
@@ -32,18 +47,22 @@ import itertools
 import json
 import math
 import os
+import signal
+import stat
 import sys
+import threading
 import time
 import tomllib
 from pathlib import Path
 
-from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_OK, RunStopped, SceneError,
-                              TensormassError)
-from ..runtime.output import write_bytes_atomic, write_text_atomic
+from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, RunInterrupted,
+                              RunStopped, SceneError, TensormassError)
+from ..runtime.output import check_writable, write_bytes_atomic, write_text_atomic
 
 __all__ = ["parse_vary", "split_values", "apply_override", "plan_tasks", "run_task", "map_tasks",
            "run_batch", "write_table", "add_batch_command", "THREAD_ENV", "TIMING_COLUMNS", "DASK_MISSING",
-           "kernel_locks", "worker_environment"]
+           "kernel_locks", "worker_environment", "check_table_path", "is_batch_table", "partial_path",
+           "plan_workers", "study_cost", "PARTIAL_FORMAT"]
 
 # One thread per worker for every pool a task may start (set before numpy / numba are imported).
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -54,6 +73,14 @@ DASK_MISSING = ('dask.distributed is not installed: --workers above 1 and --sche
                 'install it with: pip install "tensormass[distributed]" (or run with --workers 1)')
 MEMORY_MARGIN = 1.5          # a worker's memory limit: this x the largest task's estimate ...
 MEMORY_FLOOR = 1 << 30       # ... and no less than this (the dask worker itself, imports, a spread)
+# The workers' own logs (distributed's warnings, and its errors while a cluster shuts down) are
+# not the study's output: what a task did comes back in its row. Set before they start.
+WORKER_QUIET_ENV = {"DASK_LOGGING__DISTRIBUTED": "error"}
+PARTIAL_FORMAT = "tensormass-batch-rows/1"
+# A table of ours: a CSV whose header starts with these columns and has these too.
+TABLE_FIRST = ("task", "scene")
+TABLE_COLUMNS = {"status", "exit_code", "error"}
+PARQUET_KEY, PARQUET_VALUE = b"tensormass", b"batch-table/1"
 HEALTH_KEYS = ("min_det_F", "min_det_F_final", "inverted_final", "max_relative_displacement",
                "max_energy_growth", "energy_scale")
 
@@ -264,6 +291,8 @@ def run_task(spec: dict, threads=None, max_memory=None) -> dict:
             sim = _simulation(scene)
             try:
                 summary, stopped = sim.run(), None
+            except RunInterrupted:
+                raise KeyboardInterrupt from None   # Ctrl-C stops the study, not only this task
             except RunStopped as exc:
                 summary, stopped = exc.summary, exc
         row.update(_summary_fields(summary))
@@ -320,10 +349,11 @@ def dask_available() -> bool:
 
 @contextlib.contextmanager
 def worker_environment():
-    """THREAD_ENV in os.environ while the LocalCluster spawns its workers (they inherit it before
-    importing anything), restored after."""
-    old = {k: os.environ.get(k) for k in THREAD_ENV}
-    os.environ.update(THREAD_ENV)
+    """THREAD_ENV (and WORKER_QUIET_ENV) in os.environ while the LocalCluster spawns its workers
+    (they inherit it before importing anything), restored after."""
+    env = {**THREAD_ENV, **WORKER_QUIET_ENV}
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
     try:
         yield
     finally:
@@ -332,19 +362,6 @@ def worker_environment():
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-
-
-def memory_limit(estimates, workers: int) -> int | None:
-    """Bytes per worker: the largest task's estimate x MEMORY_MARGIN (at least MEMORY_FLOOR), no
-    more than the machine's available memory / workers; None when nothing is known."""
-    from ..runtime.resources import available_memory
-    avail = available_memory()
-    cap = avail // max(workers, 1) if avail else None
-    known = [e for e in estimates if e]
-    want = max(MEMORY_FLOOR, int(MEMORY_MARGIN * max(known))) if known else None
-    if want is None:
-        return cap
-    return want if cap is None else min(want, cap)
 
 
 class _Counter:
@@ -362,14 +379,16 @@ class _Counter:
 
 
 def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_limit: int | None = None,
-              label: str = "task", progress=True, on_result=None, capture: bool = True) -> list:
+              label: str = "task", progress=True, on_result=None, capture: bool = True, on_done=None) -> list:
     """[(True, fn(*item)) or (False, 'error text')] in the order of items, whatever order they finish in.
 
     workers 1 and no scheduler: in this process, one after the other (no dask needed). Otherwise
     dask.distributed: a Client of `scheduler`, else a LocalCluster of `workers` single-threaded
     processes (THREAD_ENV, mem_limit bytes each). on_result(i, outcome) is called in item order
-    as soon as the results up to i are in (to print a task's output in order). capture=False: a
-    task's exception propagates (the first in item order that the engine sees), as it would in a loop."""
+    as soon as the results up to i are in (to print a task's output in order); on_done(i, outcome)
+    as soon as item i is done, in the order they finish. capture=False: a task's exception
+    propagates (the first in item order that the engine sees), as it would in a loop. Ctrl-C
+    (KeyboardInterrupt) propagates after the cluster is shut down (see _client)."""
     items = [tuple(it) for it in items]
     counter = _Counter(len(items), label) if progress and items else None
     results: list = [None] * len(items)
@@ -390,6 +409,8 @@ def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_lim
                     if not capture:
                         raise
                     results[i] = (False, f"{type(exc).__name__}: {exc}")
+                if on_done is not None:
+                    on_done(i, results[i])
                 if counter:
                     counter(i + 1)
                 _flush()
@@ -408,6 +429,8 @@ def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_lim
                     if not capture:
                         raise
                     results[i] = (False, f"{type(exc).__name__}: {exc}")
+                if on_done is not None:
+                    on_done(i, results[i])
                 done += 1
                 if counter:
                     counter(done)
@@ -418,32 +441,120 @@ def map_tasks(fn, items, workers: int = 1, scheduler: str | None = None, mem_lim
             counter.finish()
 
 
+def _block_sigint():
+    """Hold SIGINT in this thread (pending, delivered when unblocked); the old mask, None where
+    masks cannot be set (not POSIX, not the main thread: nothing to hold there)."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        return None
+    # multiprocessing starts its resource tracker with the first process and unblocks SIGINT in the
+    # starting thread afterwards, whatever the mask was: started now, before the mask is set
+    with contextlib.suppress(Exception):
+        from multiprocessing import resource_tracker
+        resource_tracker.ensure_running()
+    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def _restore_mask(mask, drop_pending: bool = False) -> None:
+    """Back to mask; drop_pending: a Ctrl-C that arrived while held is discarded, not delivered."""
+    if mask is None:
+        return
+    if drop_pending and hasattr(signal, "sigtimedwait"):
+        while signal.sigtimedwait([signal.SIGINT], 0) is not None:
+            pass
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+@contextlib.contextmanager
+def _distributed_logs(level):
+    """distributed's loggers in this process at level while the block runs."""
+    import logging
+    logger = logging.getLogger("distributed")
+    old = logger.level
+    logger.setLevel(level)
+    try:
+        yield
+    finally:
+        logger.setLevel(old)
+
+
+def _quiet_worker() -> None:
+    """Run on every worker before the cluster closes: its shutdown is not worth a log line."""
+    import logging
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
 @contextlib.contextmanager
 def _client(distributed, workers, scheduler, mem_limit):
+    """A Client of `scheduler`, else of a LocalCluster of `workers` processes; closed in order
+    (client, then cluster) on every way out, Ctrl-C included.
+
+    Ctrl-C at a terminal reaches every process of the foreground group, the workers too, which
+    then die in the middle of a task with tracebacks. So SIGINT is blocked while the cluster
+    starts: its worker processes (and the threads that start them) inherit the blocked mask and
+    never see it; this process takes it once the cluster is up (a Ctrl-C during the start is
+    delivered then). While the cluster closes, SIGINT is held again and a second Ctrl-C dropped."""
     import logging
-    logging.getLogger("distributed").setLevel(logging.ERROR)     # one line per event is noise here
-    if scheduler is not None:
+    client = cluster = None
+    mask = _block_sigint()
+    with _distributed_logs(logging.ERROR):            # one line per event is noise here
         try:
-            client = distributed.Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise TensormassError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        with client:
+            if scheduler is not None:
+                try:
+                    client = distributed.Client(scheduler, timeout="20s")
+                except (OSError, TimeoutError) as exc:
+                    raise TensormassError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            else:
+                with worker_environment():
+                    cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       memory_limit=mem_limit if mem_limit else "auto",
+                                                       dashboard_address=None, env=dict(THREAD_ENV))
+                client = distributed.Client(cluster)
+            _restore_mask(mask)                       # a Ctrl-C held during the start lands here
+            mask = None
             yield client
-        return
-    with worker_environment():
-        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                           memory_limit=mem_limit if mem_limit else "auto",
-                                           dashboard_address=None, env=dict(THREAD_ENV))
-    with cluster, distributed.Client(cluster) as client:
-        yield client
+        finally:
+            held = _block_sigint() if mask is None else mask
+            try:
+                with _distributed_logs(logging.CRITICAL):
+                    _close(client, cluster, local=scheduler is None)
+            finally:
+                _restore_mask(held, drop_pending=True)
+
+
+def _close(client, cluster, local: bool) -> None:
+    """Client first (its futures cancelled), then the cluster; the workers told to keep quiet."""
+    if client is not None:
+        if local:
+            with contextlib.suppress(Exception):
+                client.run(_quiet_worker)
+        with contextlib.suppress(Exception):
+            client.close()
+    if cluster is not None:
+        with contextlib.suppress(Exception):
+            cluster.close()
 
 
 def worker_info() -> dict:
-    """What a worker runs with (tests check the one-thread defaults): environment, numba and BLAS threads."""
+    """What a worker runs with (tests check the one-thread defaults): environment, numba and BLAS
+    threads, and whether every thread of it blocks SIGINT (a terminal's Ctrl-C is not for it)."""
     import numba
     from threadpoolctl import threadpool_info
     return {"env": {k: os.environ.get(k) for k in THREAD_ENV}, "numba_threads": numba.get_num_threads(),
-            "blas_threads": sorted({p["num_threads"] for p in threadpool_info()}), "pid": os.getpid()}
+            "blas_threads": sorted({p["num_threads"] for p in threadpool_info()}), "pid": os.getpid(),
+            "sigint_blocked": _threads_block_sigint()}
+
+
+def _threads_block_sigint():
+    """Whether every thread of this process blocks SIGINT (/proc; None where unknown)."""
+    try:
+        found = []
+        for task in os.listdir(f"/proc/{os.getpid()}/task"):
+            with open(f"/proc/{os.getpid()}/task/{task}/status", encoding="ascii") as handle:
+                mask = next(int(line.split()[1], 16) for line in handle if line.startswith("SigBlk:"))
+            found.append(bool(mask >> (signal.SIGINT - 1) & 1))
+        return all(found) if found else None
+    except (OSError, ValueError, StopIteration):
+        return None
 
 
 # ============================================================================== the table
@@ -478,15 +589,13 @@ def csv_text(rows) -> str:
 
 
 def write_table(rows, out) -> list:
-    """out (CSV) and, with pyarrow, out with .parquet, each atomically; the paths written (a note
-    on stderr when pyarrow is missing)."""
+    """out (CSV) and, with pyarrow, out with .parquet (its schema marked as ours), each atomically;
+    the paths written (a note on stderr when pyarrow is missing)."""
     out = Path(out)
     write_text_atomic(out, csv_text(rows))
     written = [out]
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
+    pa, pq = _pyarrow()
+    if pa is None:
         print("batch: pyarrow is not installed: wrote the CSV only (pip install pyarrow for Parquet)",
               file=sys.stderr)
         return written
@@ -498,10 +607,158 @@ def write_table(rows, out) -> list:
         except (pa.ArrowInvalid, pa.ArrowTypeError):
             columns[c] = pa.array([None if v is None else _cell(v) for v in values], type=pa.string())
     buf = pa.BufferOutputStream()
-    pq.write_table(pa.table(columns), buf)
+    pq.write_table(pa.table(columns).replace_schema_metadata({PARQUET_KEY: PARQUET_VALUE}), buf)
     parquet = out.with_suffix(".parquet")
     write_bytes_atomic(parquet, buf.getvalue().to_pybytes())
     return written + [parquet]
+
+
+def _pyarrow():
+    """(pyarrow, pyarrow.parquet), or (None, None) without pyarrow."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return None, None
+    return pa, pq
+
+
+# ============================================================================== the table's files
+
+
+def partial_path(out) -> Path:
+    """The rows of a study in progress: <out>.partial (see the module docstring)."""
+    out = Path(out)
+    return out.with_name(out.name + ".partial")
+
+
+def _first_bytes(path, n: int = 65536) -> bytes | None:
+    """The first n bytes of a regular file (not a link), None for anything else."""
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return None
+        with open(path, "rb") as handle:
+            return handle.read(n)
+    except OSError:
+        return None
+
+
+def is_batch_table(path) -> bool:
+    """A CSV written by tensormass batch: its header starts with task,scene and has status,
+    exit_code and error (the columns every row of ours has)."""
+    head = _first_bytes(path)
+    if not head:
+        return False
+    line = head.split(b"\n", 1)[0].decode("utf-8", "replace")
+    try:
+        header = next(csv.reader([line]))
+    except (csv.Error, StopIteration):
+        return False
+    return tuple(header[:2]) == TABLE_FIRST and TABLE_COLUMNS <= set(header)
+
+
+def _is_partial(path) -> bool:
+    head = _first_bytes(path, 4096)
+    if not head:
+        return False
+    try:
+        first = json.loads(head.split(b"\n", 1)[0])
+    except ValueError:
+        return False
+    return isinstance(first, dict) and first.get("format") == PARTIAL_FORMAT
+
+
+def _is_our_parquet(path) -> bool:
+    pa, pq = _pyarrow()
+    if _first_bytes(path, 4) != b"PAR1":
+        return False
+    try:
+        metadata = pq.read_schema(path).metadata or {}
+    except Exception:              # noqa: BLE001 - a file pyarrow cannot read is not ours
+        return False
+    return metadata.get(PARQUET_KEY) == PARQUET_VALUE
+
+
+def _same_path(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_table_path(out, scenes=()) -> Path:
+    """--out, checked before the study (the rules of run --json): refused are a .parquet name (the
+    Parquet copy goes beside the CSV), a folder, a missing folder, an input scene, a link, a device,
+    an existing file that tensormass batch did not write (the table, its .partial rows, its .parquet
+    copy when pyarrow writes one), and a folder this process cannot write in."""
+    out = Path(out)
+    if out.suffix.lower() == ".parquet":
+        raise TensormassError(f"--out {out}: give the CSV table's name (e.g. {out.with_suffix('.csv').name}); "
+                              "the Parquet copy is written beside it")
+    if out.is_dir():
+        raise TensormassError(f"--out {out}: is a folder; give a file name (e.g. {out / 'batch.csv'})")
+    if not out.parent.is_dir():
+        raise TensormassError(f"--out {out}: folder {out.parent} does not exist")
+    files = [(out, is_batch_table, "a table of tensormass batch"),
+             (partial_path(out), _is_partial, "rows of tensormass batch")]
+    if _pyarrow()[0] is not None:
+        files.append((out.with_suffix(".parquet"), _is_our_parquet, "a table of tensormass batch"))
+    for path, ours, what in files:
+        for scene in scenes:
+            if _same_path(path, scene):
+                raise TensormassError(f"--out {out}: {path} is an input scene file; give the table another name")
+        _check_replaceable(out, path, ours, what)
+    check_writable(out.parent, "--out")
+    return out
+
+
+def _check_replaceable(out: Path, path: Path, ours, what: str) -> None:
+    """An existing file at path may only be replaced when it is one of ours."""
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise TensormassError(f"--out {out}: {path}: {exc.strerror or exc}") from None
+    if stat.S_ISLNK(info.st_mode):
+        raise TensormassError(f"--out {out}: {path} is a symbolic link; refusing to replace it, give another name")
+    if not stat.S_ISREG(info.st_mode):
+        raise TensormassError(f"--out {out}: {path} exists and is not a regular file; refusing to write there")
+    if not ours(path):
+        raise TensormassError(f"--out {out}: {path} exists and is not {what}; refusing to replace it, "
+                              "remove it or give another name")
+
+
+def _jsonable(value):
+    """A row's value for a JSON line: NaN and infinities as text (JSON has none)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+class _PartialRows:
+    """<out>.partial: a header line, then one JSON row per finished task, flushed per row."""
+
+    def __init__(self, out: Path, n_tasks: int):
+        self.path = partial_path(out)
+        self.count = 0
+        self.handle = open(self.path, "w", encoding="utf-8")
+        self._line({"format": PARTIAL_FORMAT, "tasks": n_tasks, "table": str(out),
+                    "note": "rows in the order the tasks finished; the table is written in task order at the end"})
+
+    def _line(self, data) -> None:
+        self.handle.write(json.dumps({k: _jsonable(v) for k, v in data.items()}, default=str) + "\n")
+        self.handle.flush()
+
+    def add(self, row: dict) -> None:
+        self._line(row)
+        self.count += 1
+
+    def close(self, remove: bool) -> None:
+        self.handle.close()
+        if remove:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(self.path)
 
 
 # ============================================================================== the command
@@ -516,50 +773,118 @@ def _default_workers(n_tasks: int) -> int:
 
 
 def _estimates(tasks) -> list:
-    """Each task's peak memory estimate (runtime.resources) in bytes, None where it cannot be made
-    (the task itself will report why)."""
+    """Each task's resource estimate (runtime.resources.Estimate: peak bytes, seconds), None where
+    it cannot be made (the task itself will report why)."""
     from ..runtime.resources import estimate
     out = []
     for t in tasks:
         try:
-            out.append(estimate(load_scene(t["scene"], t["values"], load_mesh=False)).bytes)
+            out.append(estimate(load_scene(t["scene"], t["values"], load_mesh=False)))
         except Exception:          # noqa: BLE001 - a scene that does not load fails in its task
             out.append(None)
     return out
 
 
+def _fmt_seconds(s: float) -> str:
+    if s < 1.0:
+        return f"{s * 1e3:.2g} ms"
+    if s < 3600:
+        return f"{s:.3g} s"
+    return f"{s / 3600:.3g} h"
+
+
+def plan_workers(requested, n_tasks: int, estimates, budget, explicit: bool) -> tuple:
+    """(workers, per-worker memory limit in bytes or None, messages): the requested workers, no more
+    than the tasks, and no more than budget (bytes the study may use; None: unknown) holds at the
+    largest task's estimate x MEMORY_MARGIN (at least MEMORY_FLOOR) each."""
+    messages = []
+    workers = requested
+    if workers > n_tasks:
+        if explicit:
+            messages.append(f"--workers {workers}: capped at {n_tasks}, the number of tasks")
+        workers = n_tasks
+    known = [e for e in estimates if e is not None]
+    per = max(MEMORY_FLOOR, int(MEMORY_MARGIN * max(e.bytes for e in known))) if known else MEMORY_FLOOR
+    if workers > 1 and budget:
+        fit = max(1, int(budget // per))
+        if workers > fit:
+            from ..runtime.resources import fmt_bytes
+            messages.append(f"{workers} workers capped at {fit}: each needs up to {fmt_bytes(per)} (the largest "
+                            f"task's estimate x {MEMORY_MARGIN:g}, at least {fmt_bytes(MEMORY_FLOOR)}) and "
+                            f"{fmt_bytes(budget)} may be used")
+            workers = fit
+    return workers, (per if workers > 1 else None), messages
+
+
+def study_cost(estimates, workers: int) -> str:
+    """One line: the tasks, the largest peak memory and the stepping time per task, in all and per
+    worker (runtime.resources' estimates; setup and kernel compilation are not in them)."""
+    from ..runtime.resources import fmt_bytes
+    known = [e for e in estimates if e is not None]
+    n = len(estimates)
+    if not known:
+        return f"{n} task(s); no estimate (their scenes do not load: each task will say why)"
+    seconds = [e.seconds for e in known]
+    total = sum(seconds) * n / len(known)
+    mean, most = _fmt_seconds(sum(seconds) / len(seconds)), _fmt_seconds(max(seconds))
+    text = (f"{n} task(s), estimated per task: up to {fmt_bytes(max(e.bytes for e in known))} peak memory, "
+            f"~{mean} of stepping" + (f" (up to ~{most})" if most != mean else "") + f"; "
+            f"~{_fmt_seconds(total)} in all" + (f", ~{_fmt_seconds(total / workers)} on {workers} workers"
+                                               if workers > 1 else ""))
+    if len(known) < n:
+        text += f" ({n - len(known)} task(s) not estimated: their scene does not load)"
+    return text
+
+
 def run_batch(scenes, vary=(), workers=None, scheduler=None, out="batch.csv", stream=None, progress=True) -> tuple:
-    """Plan, run and tabulate a study; returns (rows, exit code). See the module docstring."""
+    """Plan, run and tabulate a study; returns (rows, exit code). See the module docstring.
+    Ctrl-C: (rows finished so far, EXIT_INTERRUPTED), their rows kept in the partial file."""
     stream = stream if stream is not None else sys.stderr
     tasks = plan_tasks(scenes, parse_vary(vary) if vary and isinstance(vary[0], str) else list(vary))
+    out = check_table_path(out, scenes)
     explicit = workers is not None
     workers = _default_workers(len(tasks)) if workers is None else int(workers)
     if workers < 1:
         raise TensormassError(f"--workers must be at least 1, got {workers}")
+    estimates = _estimates(tasks)
+    limit = None
+    if scheduler is None:
+        from ..runtime.resources import limit_bytes
+        workers, limit, messages = plan_workers(workers, len(tasks), estimates, limit_bytes()[0], explicit)
+        for line in messages:
+            print(f"batch: {line}", file=stream)
     if (workers > 1 or scheduler) and not dask_available():
         if explicit or scheduler:
             raise TensormassError(DASK_MISSING)
         print(f"batch: dask.distributed is not installed: running sequentially "
               f'(pip install "tensormass[distributed]" for {workers} workers)', file=stream)
-        workers = 1
+        workers, limit = 1, None
     distributed = workers > 1 or scheduler is not None
-    limit = memory_limit(_estimates(tasks), workers) if distributed and scheduler is None else None
     where = (f"cluster {scheduler}" if scheduler else
              f"{workers} worker processes, 1 thread each" + (f", {limit / 2 ** 30:.2f} GiB each" if limit else "")
              if distributed else "this process, one task after the other")
     print(f"batch: {len(tasks)} task(s) ({len(scenes)} scene(s)) on {where}", file=stream)
+    print(f"batch: cost: {study_cost(estimates, 1 if scheduler else workers)}", file=stream)
     start = time.perf_counter()
-    outcomes = map_tasks(run_task, [(t, 1 if distributed else None) for t in tasks], workers=workers,
-                         scheduler=scheduler, mem_limit=limit, label="task", progress=progress)
-    rows = []
-    for t, (ok, value) in zip(tasks, outcomes):
-        if ok:
-            rows.append(value)
-        else:                      # the task never ran to its end (worker killed, e.g. over its memory)
-            row = {"task": t["task"], "scene": t["scene"], **{f"vary.{k}": _plain(v) for k, v in t["values"].items()}}
-            row.update(status="error", exit_code=EXIT_INTERNAL, error=f"task lost: {value}")
-            rows.append(row)
+    partial = _PartialRows(out, len(tasks))
+    rows: list = [None] * len(tasks)
+
+    def done(i, outcome):
+        rows[i] = _row(tasks[i], outcome)
+        partial.add(rows[i])
+    try:
+        map_tasks(run_task, [(t, 1 if distributed else None) for t in tasks], workers=workers,
+                  scheduler=scheduler, mem_limit=limit, label="task", progress=progress, on_done=done)
+    except KeyboardInterrupt:
+        partial.close(remove=False)
+        print(f"tensormass: interrupted: {partial.count} of {len(tasks)} task(s) finished, their rows kept in "
+              f"{partial.path}", file=stream)
+        return [r for r in rows if r is not None], EXIT_INTERRUPTED
+    except BaseException:
+        partial.close(remove=False)
+        raise
     written = write_table(rows, out)
+    partial.close(remove=True)
     failed = [r for r in rows if r["exit_code"] != EXIT_OK]
     print(f"batch: {len(rows) - len(failed)}/{len(rows)} task(s) ok in {time.perf_counter() - start:.1f} s; "
           f"wrote {', '.join(map(str, written))}", file=stream)
@@ -570,6 +895,17 @@ def run_batch(scenes, vary=(), workers=None, scheduler=None, out="batch.csv", st
             print(f"  [{r['task']}] {r['scene']}{' ' + values if values else ''}: {r['status']} "
                   f"(exit {r['exit_code']}): {r['error']}", file=stream)
     return rows, max((r["exit_code"] for r in failed), default=EXIT_OK)
+
+
+def _row(task, outcome) -> dict:
+    """A task's row: run_task's, or one saying that the task never ran to its end (worker killed,
+    e.g. over its memory)."""
+    ok, value = outcome
+    if ok:
+        return value
+    row = {"task": task["task"], "scene": task["scene"], **{f"vary.{k}": _plain(v) for k, v in task["values"].items()}}
+    row.update(status="error", exit_code=EXIT_INTERNAL, error=f"task lost: {value}")
+    return row
 
 
 def cmd_batch(args) -> int:

@@ -7,7 +7,9 @@ peak_memory_mb, stability's wall_time): everything else must be identical, byte 
 from __future__ import annotations
 
 import csv
+import json
 import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -17,6 +19,8 @@ import pytest
 from tensormass.apps import batch
 from tensormass.apps.cli import main
 from tensormass.runtime.errors import SceneError, TensormassError
+
+from test_cli_safety import deny_writes
 
 SCENE = """
 name = "tiny"
@@ -111,9 +115,122 @@ def test_sequential_batch_reports_failures_and_finishes_the_others(scene, tmp_pa
 
 def test_workers_above_one_without_dask_name_the_extra(scene, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(batch, "dask_available", lambda: False)
-    assert main(["batch", str(scene), "--workers", "2", "--out", str(tmp_path / "t.csv")]) == 2
+    assert main(["batch", str(scene), "--vary", "material.0.E=1e8,2e8", "--workers", "2",
+                 "--out", str(tmp_path / "t.csv")]) == 2
     assert 'pip install "tensormass[distributed]"' in capsys.readouterr().err
     assert not (tmp_path / "t.csv").exists()
+
+
+# -- the table's path, checked before the study (issue #29: batch --out wrote over the scene) ------
+
+def _no_task(monkeypatch):
+    monkeypatch.setattr(batch, "run_task", lambda *a, **k: pytest.fail("a task ran"))
+
+
+@pytest.mark.parametrize("target, reason", [
+    ("tiny.toml", "is an input scene file"),
+    ("tiny.parquet", "give the CSV table's name"),
+    ("mine.csv", "exists and is not a table of tensormass batch"),
+    ("folder", "is a folder"),
+    ("missing/t.csv", "does not exist"),
+    ("link.csv", "symbolic link"),
+    ("locked/t.csv", "Permission denied"),
+])
+def test_out_is_checked_before_any_task(scene, tmp_path, capsys, monkeypatch, target, reason):
+    _no_task(monkeypatch)
+    (tmp_path / "mine.csv").write_text("a,b\n1,2\n")
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "locked").mkdir()
+    (tmp_path / "link.csv").symlink_to(tmp_path / "mine.csv")
+    deny_writes(monkeypatch, tmp_path / "locked")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    code = main(["batch", str(scene), "--vary", "material.0.E=1e8,2e8", "--workers", "1", "--quiet",
+                 "--out", str(tmp_path / target)])
+    err = capsys.readouterr().err
+    assert code == 2 and reason in err and len(err.splitlines()) == 1, err
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+    assert not list(tmp_path.rglob("*.partial"))
+
+
+def test_an_earlier_table_of_ours_is_replaced(scene, tmp_path):
+    out = tmp_path / "t.csv"
+    assert main(["batch", str(scene), "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    assert batch.is_batch_table(out)
+    assert main(["batch", str(scene), "--vary", "material.0.E=1e8,2e8", "--workers", "1", "--quiet",
+                 "--out", str(out)]) == 0
+    assert len(_table(out)) == 2 and not batch.partial_path(out).exists()
+
+
+# -- rows as they finish, Ctrl-C -------------------------------------------------------------------
+
+def test_rows_are_kept_as_they_finish_and_ctrl_c_keeps_them(scene, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "t.csv"
+    partial = batch.partial_path(out)
+    real, seen = batch.run_task, []
+
+    def task(spec, threads=None, max_memory=None):
+        # what is on disk when task k starts: the header and the k rows finished before (flushed)
+        seen.append(len(partial.read_text().splitlines()))
+        if spec["task"] == 2:
+            raise KeyboardInterrupt                  # Ctrl-C during the third task
+        return real(spec, threads, max_memory)
+    monkeypatch.setattr(batch, "run_task", task)
+    code = main(["batch", str(scene), "--vary", "material.0.E=1e8,2e8,3e8,4e8", "--workers", "1", "--quiet",
+                 "--out", str(out)])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 130 and seen == [1, 2, 3]
+    assert err[-1] == f"tensormass: interrupted: 2 of 4 task(s) finished, their rows kept in {partial}"
+    assert "Traceback" not in "\n".join(err) and not out.exists()
+    lines = [json.loads(line) for line in partial.read_text().splitlines()]
+    assert lines[0]["format"] == batch.PARTIAL_FORMAT and lines[0]["tasks"] == 4
+    assert [r["task"] for r in lines[1:]] == [0, 1] and [r["status"] for r in lines[1:]] == ["ok", "ok"]
+    # a rerun replaces the rows of ours and ends with the table, the partial file gone
+    monkeypatch.setattr(batch, "run_task", real)
+    assert main(["batch", str(scene), "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    assert out.is_file() and not partial.exists()
+
+
+def test_ctrl_c_in_a_task_stops_the_study(scene, tmp_path, monkeypatch):
+    # the runtime turns Ctrl-C into RunInterrupted: a study must stop there, not record the task and go on
+    from tensormass.runtime import simulation
+    monkeypatch.setattr(simulation.Simulation, "_loop", lambda self: (_ for _ in ()).throw(KeyboardInterrupt))
+    rows, code = batch.run_batch([scene], ["material.0.E=1e8,2e8"], workers=1, out=tmp_path / "t.csv",
+                                 progress=False)
+    assert code == 130 and rows == []
+
+
+# -- workers and cost --------------------------------------------------------------------------------
+
+def test_workers_capped_at_the_tasks_and_the_memory_and_the_cost_printed(scene, tmp_path, capsys, monkeypatch):
+    engine = []
+
+    class NoStudy(Exception):
+        pass
+
+    def no_study(fn, items, **kw):                   # what the engine would start; nothing runs
+        engine.append(kw["workers"])
+        raise NoStudy
+    monkeypatch.setattr(batch, "dask_available", lambda: True)
+    monkeypatch.setattr(batch, "map_tasks", no_study)
+    monkeypatch.setenv("TENSORMASS_MAX_MEMORY", "100G")
+    with pytest.raises(NoStudy):
+        batch.run_batch([scene], ["material.0.E=1e8,2e8"], workers=1000, out=tmp_path / "t.csv", progress=False)
+    err = capsys.readouterr().err
+    assert engine == [2] and "--workers 1000: capped at 2, the number of tasks" in err
+    assert "cost: 2 task(s), estimated per task: up to" in err and "peak memory" in err
+    # each worker needs at least MEMORY_FLOOR: a budget of 2.5 of them holds 2 workers of 3 tasks
+    monkeypatch.setenv("TENSORMASS_MAX_MEMORY", str(int(2.5 * batch.MEMORY_FLOOR)))
+    with pytest.raises(NoStudy):
+        batch.run_batch([scene], ["material.0.E=1e8,2e8,3e8"], workers=3, out=tmp_path / "t.csv", progress=False)
+    err = capsys.readouterr().err
+    assert engine[-1] == 2 and "3 workers capped at 2" in err
+
+
+def test_study_cost_sums_the_estimates():
+    from types import SimpleNamespace as E
+    line = batch.study_cost([E(bytes=2 ** 30, seconds=2.0), E(bytes=2 ** 29, seconds=4.0), None], workers=2)
+    assert line.startswith("3 task(s), estimated per task: up to 1 GiB peak memory, ~3 s of stepping")
+    assert "~9 s in all, ~4.5 s on 2 workers" in line and "1 task(s) not estimated" in line
 
 
 # -- dask.distributed ------------------------------------------------------------------------------
@@ -130,17 +247,20 @@ def test_two_workers_give_the_sequential_table(scene, tmp_path):
     assert len({r["probe.tip.2"] for r in _table(par)}) == 8
 
 
-def test_workers_run_one_thread_each():
+def test_workers_run_one_thread_each_and_leave_ctrl_c_to_this_process(capfd):
     distributed = pytest.importorskip("distributed")
     before = {k: os.environ.get(k) for k in batch.THREAD_ENV}
-    with batch.worker_environment():
-        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, env=dict(batch.THREAD_ENV))
-    with cluster, distributed.Client(cluster) as client:
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    with batch._client(distributed, 1, None, None) as client:
         info = client.submit(batch.worker_info, pure=False).result()
+        assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask          # this process takes Ctrl-C
     assert info["env"] == batch.THREAD_ENV
     assert info["numba_threads"] == 1 and info["blas_threads"] in ([1], [])
+    # a terminal's Ctrl-C reaches the workers too: they block it (else: their tracebacks, 4 of 4 times)
+    assert info["sigint_blocked"] in (True, None)
     assert {k: os.environ.get(k) for k in batch.THREAD_ENV} == before       # this process's own, restored
+    assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask
+    assert "Traceback" not in capfd.readouterr().err                        # a quiet shutdown
 
 
 def test_report_accuracy_same_csv_on_one_and_two_workers(tmp_path):
