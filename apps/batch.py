@@ -708,7 +708,7 @@ def check_table_path(out, scenes=()) -> Path:
             if _same_path(path, scene):
                 raise TensormassError(f"--out {out}: {path} is an input scene file; give the table another name")
         _check_replaceable(out, path, ours, what)
-    check_writable(out.parent, "--out")
+    check_writable(out.parent, f"--out {out}: folder")
     return out
 
 

@@ -1425,6 +1425,28 @@ def _output_cases() -> None:
               "--no-compile", "--out", "locked/k"), files=(("locked", {"folder": True}),), hooks=(("readonly", "locked"),))
     add("output", "demo --out onto a file", err, r"demo.*not a folder", argv=("demo", "--out", "demo"),
         files=(("demo", "a file\n"),))
+    # issue #29 item 6, data loss: the history beside --json, a folder another run writes, batch --out
+    add("output", "--json s.csv (its own history)", err, r"--json s\.csv.*same name with \.csv",
+        argv=ours + ("--json", "s.csv"), why="#29: the history written over the summary")
+    add("output", "--json onto the picture", err, r"--json out/von_mises\.png.*written over",
+        argv=ours + ("--picture", "--json", "out/von_mises.png"), files=(("out", {"folder": True}),))
+    add("output", "a folder another run is writing", err, r"output folder out: another tensormass run \(pid 1 on ",
+        files=(("out/.tensormass.lock", "pid=1 host=another-machine start=?\n"),),
+        why="#29: two runs into one folder, the .pvd listing frames twice")
+    batch = ("batch", "scene.toml", "--vary", "material.0.E=1e6,2e6", "--workers", "1", "--quiet")
+    add("output", "batch --out onto the scene", err, r"--out scene\.toml.*input scene file",
+        argv=batch + ("--out", "scene.toml"), why="#29: the scene overwritten by the table")
+    add("output", "batch --out onto someone's CSV", err, r"--out data\.csv.*not a table of tensormass batch",
+        argv=batch + ("--out", "data.csv"), files=(("data.csv", "x,y\n1,2\n"),), why="#29: a user's CSV replaced")
+    add("output", "batch --out onto a folder", err, r"--out docs.*is a folder", argv=batch + ("--out", "docs"),
+        files=(("docs", {"folder": True}),), why="#29: the whole study ran, then its results were lost")
+    add("output", "batch --out into a missing folder", err, r"--out no/t\.csv.*does not exist",
+        argv=batch + ("--out", "no/t.csv"))
+    add("output", "batch --out .parquet", err, r"--out t\.parquet.*CSV", argv=batch + ("--out", "t.parquet"))
+    add("output", "batch --out into a read-only folder", err, r"--out locked/t\.csv.*Permission denied",
+        argv=batch + ("--out", "locked/t.csv"), files=(("locked", {"folder": True}),), hooks=(("readonly", "locked"),))
+    add("output", "batch --out onto an earlier table", "ok", argv=batch + ("--out", "t.csv"),
+        before=(batch + ("--out", "t.csv"),), may_change=("t.csv",))
     full = ("fail", "meshio:write", 3, "ENOSPC", True)
     add("output", "disk full at the third frame", err, r"frame_000002\.vtu.*No space left", hooks=(full,),
         wrote_before_error=True, why="item 7: traceback")
