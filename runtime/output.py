@@ -404,9 +404,15 @@ class FolderLock:
                 raise TensormassError(f"output folder {self.folder}: cannot create its lock {self.path}: "
                                       f"{_reason(exc)}") from None
             try:
-                os.write(fd, text)
-            finally:
+                written = os.write(fd, text)
+            except BaseException:                 # Ctrl-C too: an empty lock would name no run
                 os.close(fd)
+                _remove_quietly(self.path)
+                raise
+            os.close(fd)
+            if written != len(text):
+                _remove_quietly(self.path)
+                raise TensormassError(f"output folder {self.folder}: cannot write its lock {self.path} (disk full?)")
             self.held = True
             key, token = str(self.path.resolve()), next(_TOKENS)
             _HELD[key] = (token, weakref.ref(self.owner))
