@@ -13,9 +13,9 @@ from .generator import GENERATOR_VERSION as __version__
 _ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "DegenerateElementError",
            "KernelNotFoundError", "RunStopped", "RunInterrupted")
 # name -> the runtime module that defines it (imported on first use)
-_LAZY = {"load_kernel": "kernels", "Kernel": "kernels", "Scene": "scene", "Simulation": "simulation",
-         "Summary": "simulation", "FIELDS": "fields", "write_picture": "picture", "plot_history": "curves",
-         **{name: "errors" for name in _ERRORS}}
+_LAZY = {"load_kernel": "kernels.kernels", "Kernel": "kernels.kernels", "Scene": "scene.scene",
+         "Simulation": "run.simulation", "Summary": "run.simulation", "FIELDS": "physics.fields",
+         "write_picture": "run.picture", "plot_history": "run.curves", **{name: "base.errors" for name in _ERRORS}}
 __all__ = ["__version__", *_LAZY]
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-EXIT_INTERRUPTED = 130      # runtime.errors.EXIT_INTERRUPTED, not imported: that is the point
+EXIT_INTERRUPTED = 130      # runtime.base.errors.EXIT_INTERRUPTED, not imported: that is the point
 
 
 def main(argv=None) -> int:

@@ -20,7 +20,7 @@ reports (apps/reports accuracy and stability) map their sweep cases through the 
 
 Before the study: the table's path is checked (``check_table_path``: not a folder, not an input
 scene, not a file that tensormass batch did not write, in a folder that can be written; the
-same rules as ``run --json``), every task's resources are estimated (runtime.resources) and the
+same rules as ``run --json``), every task's resources are estimated (runtime.scene.resources) and the
 study's cost printed (tasks, peak memory and stepping time per task, in all), and the local
 workers are capped at the number of tasks and at what the memory allows (each worker gets the
 largest task's estimate x MEMORY_MARGIN): a message says so when they are.
@@ -55,9 +55,9 @@ import time
 import tomllib
 from pathlib import Path
 
-from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, RunInterrupted,
-                              RunStopped, SceneError, TensormassError)
-from ..runtime.output import check_writable, write_bytes_atomic, write_text_atomic
+from ..runtime.base.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, RunInterrupted,
+    RunStopped, SceneError, TensormassError)
+from ..runtime.run.output import check_writable, write_bytes_atomic, write_text_atomic
 
 __all__ = ["parse_vary", "split_values", "apply_override", "plan_tasks", "run_task", "map_tasks",
            "run_batch", "write_table", "add_batch_command", "THREAD_ENV", "TIMING_COLUMNS", "DASK_MISSING",
@@ -180,7 +180,7 @@ def plan_tasks(scenes, vary) -> list:
 
 def load_scene(path, values, load_mesh=True, max_memory=None):
     """The scene of one task: the file's TOML with the variation written in, validated."""
-    from ..runtime.scene import Scene, read_scene_file
+    from ..runtime.scene.scene import Scene, read_scene_file
     path = Path(path)
     text = read_scene_file(path)
     try:
@@ -206,7 +206,7 @@ _WARMED: set = set()      # kernel keys this process has loaded (and compiled) a
 
 
 def _lock_folder() -> Path | None:
-    from ..runtime.cache import cache_dir
+    from ..runtime.base.cache import cache_dir
     folder = cache_dir() / "locks"
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -241,8 +241,8 @@ def kernel_locks(keys):
 def _simulation(scene):
     """Simulation(scene, output=False) with its kernels loaded and compiled: under the kernels'
     locks the first time this process needs them (see kernel_locks)."""
-    from ..runtime.model import Model
-    from ..runtime.simulation import Simulation
+    from ..runtime.model.model import Model
+    from ..runtime.run.simulation import Simulation
     try:
         keys = {(k, scene.solver.backend) for k in Model.required_kernels(scene)}
     except Exception:              # noqa: BLE001 - the Simulation below reports the scene's problem
@@ -261,7 +261,7 @@ def _limit_threads(threads):
     """threads=1 (a worker): the runtime, numba and BLAS at one thread; None: leave them be."""
     if threads is None:
         return contextlib.nullcontext()
-    from ..runtime import parallel
+    from ..runtime.base import parallel
     parallel.set_threads(threads)
     try:
         from threadpoolctl import threadpool_limits
@@ -773,9 +773,9 @@ def _default_workers(n_tasks: int) -> int:
 
 
 def _estimates(tasks) -> list:
-    """Each task's resource estimate (runtime.resources.Estimate: peak bytes, seconds), None where
+    """Each task's resource estimate (runtime.scene.resources.Estimate: peak bytes, seconds), None where
     it cannot be made (the task itself will report why)."""
-    from ..runtime.resources import estimate
+    from ..runtime.scene.resources import estimate
     out = []
     for t in tasks:
         try:
@@ -808,7 +808,7 @@ def plan_workers(requested, n_tasks: int, estimates, budget, explicit: bool) -> 
     if workers > 1 and budget:
         fit = max(1, int(budget // per))
         if workers > fit:
-            from ..runtime.resources import fmt_bytes
+            from ..runtime.scene.resources import fmt_bytes
             messages.append(f"{workers} workers capped at {fit}: each needs up to {fmt_bytes(per)} (the largest "
                             f"task's estimate x {MEMORY_MARGIN:g}, at least {fmt_bytes(MEMORY_FLOOR)}) and "
                             f"{fmt_bytes(budget)} may be used")
@@ -818,8 +818,8 @@ def plan_workers(requested, n_tasks: int, estimates, budget, explicit: bool) -> 
 
 def study_cost(estimates, workers: int) -> str:
     """One line: the tasks, the largest peak memory and the stepping time per task, in all and per
-    worker (runtime.resources' estimates; setup and kernel compilation are not in them)."""
-    from ..runtime.resources import fmt_bytes
+    worker (runtime.scene.resources' estimates; setup and kernel compilation are not in them)."""
+    from ..runtime.scene.resources import fmt_bytes
     known = [e for e in estimates if e is not None]
     n = len(estimates)
     if not known:
@@ -849,7 +849,7 @@ def run_batch(scenes, vary=(), workers=None, scheduler=None, out="batch.csv", st
     estimates = _estimates(tasks)
     limit = None
     if scheduler is None:
-        from ..runtime.resources import limit_bytes
+        from ..runtime.scene.resources import limit_bytes
         workers, limit, messages = plan_workers(workers, len(tasks), estimates, limit_bytes()[0], explicit)
         for line in messages:
             print(f"batch: {line}", file=stream)

@@ -32,10 +32,10 @@ import numpy as np
 from ..generator.catalogue import Entry
 from ..generator.catalogue import entries as catalogue
 from ..backends.c.loader import build, cflags, compiler
-from ..runtime.errors import TensormassError
-from ..runtime.kernels import BACKENDS, kernel_source, load_kernel, load_recompute_kernel
-from ..runtime.output import write_json_atomic
-from ..runtime.samples import random_elements
+from ..runtime.base.errors import TensormassError
+from ..runtime.kernels.kernels import BACKENDS, kernel_source, load_kernel, load_recompute_kernel
+from ..runtime.run.output import write_json_atomic
+from ..runtime.base.samples import random_elements
 from .bench_assembly import add_assembly_command
 from .bench_history import add_history_command
 from .bench_formulations import add_formulations_command
@@ -379,7 +379,7 @@ _NUMBA_PROBE = r"""
 import json, sys, time
 import numpy as np
 from tensormass.generator.elements import element as reference
-from tensormass.runtime.kernels import load_kernel
+from tensormass.runtime.kernels.kernels import load_kernel
 element, law, quadrature = sys.argv[1:4]
 from numba import njit
 t0 = time.perf_counter()

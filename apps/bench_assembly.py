@@ -4,12 +4,12 @@ into the global force vector and CSR values) on unit cubes, three ways, numba an
   kernel   the generated forces_and_stiffness into preallocated element buffers (no gather, no
            scatter): the kernel-only rate every assembly is compared with;
   buffers  what the runtime does today: gather u through cells, the kernel into preallocated
-           element buffers (n_elem, n_dofs, n_dofs), then runtime.assembly's serial scatter
+           element buffers (n_elem, n_dofs, n_dofs), then runtime.assembly.assembly's serial scatter
            through the per-entry map;
   fused    the generated forces_and_stiffness_scatter: u read through cells, f and K added
-           straight into the global arrays through the node-blocked map (runtime/fused.py);
-  runtime  what a run calls: runtime.assembly.Assembler.forces_and_stiffness of a Model on the
-           mesh (it takes the fused path), on one thread and on every thread runtime.parallel
+           straight into the global arrays through the node-blocked map (runtime/kernels/fused.py);
+  runtime  what a run calls: runtime.assembly.assembly.Assembler.forces_and_stiffness of a Model on the
+           mesh (it takes the fused path), on one thread and on every thread runtime.base.parallel
            offers (the two must give the same bytes: checked).
 
 Cases: the 40 x 40 x 40 x 6 = 384 000-tetra neo-Hookean cube (SymX's NeoHookean assembly
@@ -25,13 +25,13 @@ import time
 
 import numpy as np
 
-from ..runtime.assembly import SparsePattern, _scatter_matrix, _scatter_vector
-from ..runtime.dofs import node_dofs
-from ..runtime.errors import TensormassError
-from ..runtime.fused import block_positions
-from ..runtime.kernels import load_kernel
-from ..runtime.mesh import generate_bar
-from ..runtime.output import write_json_atomic
+from ..runtime.assembly.assembly import SparsePattern, _scatter_matrix, _scatter_vector
+from ..runtime.base.dofs import node_dofs
+from ..runtime.base.errors import TensormassError
+from ..runtime.kernels.fused import block_positions
+from ..runtime.kernels.kernels import load_kernel
+from ..runtime.mesh.bars import generate_bar
+from ..runtime.run.output import write_json_atomic
 from .machine import machine_info
 
 LAW = "neohookean"
@@ -136,10 +136,10 @@ def run_case(name, element, quadrature, n, backends=BACKENDS, repeats=REPEATS, p
 
 def _runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeats) -> dict:
     """Assembler.forces_and_stiffness of a Model on this mesh, on 1 thread and on all of them."""
-    from ..runtime import parallel
-    from ..runtime.assembly import Assembler
-    from ..runtime.model import Model
-    from ..runtime.scene import Material, Solver
+    from ..runtime.base import parallel
+    from ..runtime.assembly.assembly import Assembler
+    from ..runtime.model.model import Model
+    from ..runtime.scene.scene import Material, Solver
     model = Model(mesh, [Material(law=LAW, quadrature=quadrature, E=1.0e6, nu=0.3)],
                   solver=Solver(backend=backend), check=False)
     asm = Assembler(model)

@@ -1,5 +1,5 @@
 """Element-graph colouring benchmark: DSATUR against first-fit, and the colour-parallel matrix-free
-product (runtime.colouring.ColouredOperator) against scipy's CSR product of the assembled matrix.
+product (runtime.assembly.colouring.ColouredOperator) against scipy's CSR product of the assembled matrix.
 
     python -m tensormass.apps.bench_colouring [--n 50000] [--threads 1 2] [--json out.json]
 
@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
-from ..runtime import colouring as col
-from ..runtime import parallel
-from ..runtime.output import write_json_atomic
+from ..runtime.assembly import colouring as col
+from ..runtime.base import parallel
+from ..runtime.run.output import write_json_atomic
 
 __all__ = ["main", "run_colouring_bench", "tet_mesh", "icosphere", "plate"]
 

@@ -5,7 +5,7 @@ A body under gravity, clamped at one end, runs implicit Euler steps through the 
 body, limited by a box), and the run goes on.  Per mesh:
 
 - the cut's own record (Summary.topology): the topology change (incidence, node splitting), the
-  model's local update (runtime.cutting) and the new solver state (assembly pattern, constrained
+  model's local update (runtime.change.cutting) and the new solver state (assembly pattern, constrained
   system), and their sum — what a surgical simulator waits for between two frames;
 - the baseline measured in the same run: the same cut mesh built from scratch (Model from the
   scene's materials, loads and constraints, then the same solver state), what a remesh-and-restart
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime.output import write_json_atomic
+from ..runtime.run.output import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_cutting_bench", "add_cutting_command", "TARGET_MS"]
@@ -78,8 +78,8 @@ def _organ(folder: Path) -> str | None:
 
 def _full_rebuild(sim) -> float:
     """Seconds to build the cut model from scratch and its solver state (the baseline)."""
-    from ..runtime.integrators import Context
-    from ..runtime.model import Model
+    from ..runtime.physics.integrators import Context
+    from ..runtime.model.model import Model
     m, scene = sim.model, sim.model.scene
     start = time.perf_counter()
     model = Model(m.mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver, scene.output,
@@ -91,8 +91,8 @@ def _full_rebuild(sim) -> float:
 
 
 def _measure(text: str) -> dict:
-    from ..runtime.scene import Scene
-    from ..runtime.simulation import Simulation
+    from ..runtime.scene.scene import Scene
+    from ..runtime.run.simulation import Simulation
     sim = Simulation(Scene.from_string(text), output=False)
     s = sim.run()
     (record,) = s.topology

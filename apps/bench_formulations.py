@@ -2,7 +2,7 @@
 
 The scenes of `tensormass bench organ` (neo-Hookean, nu = 0.45, static: gravity and a tool's
 traction on the unstructured gmsh organ; the hexahedral cantilever) run with the displacement
-formulation and with the element's locking-free one (runtime.formulations: nodal_pressure on
+formulation and with the element's locking-free one (runtime.physics.formulations: nodal_pressure on
 tetra, mean_dilatation on tetra10 and hexahedra), one thread, best of `repeats`.  Reported per
 case: ms per Newton iteration (assembly + linear solve, from the run's Summary.time), the
 assembly's share, Newton iterations, the stiffness matrix's stored entries (nodal pressure couples
@@ -14,8 +14,8 @@ from __future__ import annotations
 import re
 import time
 
-from ..runtime import parallel
-from ..runtime.output import write_json_atomic
+from ..runtime.base import parallel
+from ..runtime.run.output import write_json_atomic
 from .bench_organ import Case, organ_mesh, probe_point, scene_text
 from .machine import machine_info
 
@@ -33,7 +33,7 @@ QUICK_CASES = (
 
 
 def _scene(case: Case, formulation: str):
-    from ..runtime.scene import Scene
+    from ..runtime.scene.scene import Scene
     mesh = organ_mesh(case)[0] if case.body == "organ" else None
     text = scene_text(case, mesh)
     text = re.sub(r"(?m)^(nu = .*)$", rf'\1\nformulation = "{formulation}"', text, count=1)
@@ -43,7 +43,7 @@ def _scene(case: Case, formulation: str):
 
 
 def _measure(case: Case, formulation: str, repeats: int) -> dict:
-    from ..runtime.simulation import Simulation
+    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         sim = Simulation(_scene(case, formulation), output=False)

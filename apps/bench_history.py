@@ -1,7 +1,7 @@
 """`tensormass bench history`: what the per-step history costs a run.
 
 The history keeps, for every kept row, the elastic energy (explicit runs evaluate it only for
-kept rows and frames), every probe and every reaction (runtime.history). The same scene runs
+kept rows and frames), every probe and every reaction (runtime.run.history). The same scene runs
 with every row kept and with almost none kept (the row limit set to 4: the stride doubles until
 rows are rare), on one thread, best of `repeats`; the ratio of the stepping time (total minus
 setup) per step is the history's cost. Explicit and implicit Euler, a 384-hexahedron StVK
@@ -9,9 +9,10 @@ cantilever with a probe and a clamp, frames only at the end.
 """
 from __future__ import annotations
 
-from ..runtime import parallel, simulation
-from ..runtime.output import write_json_atomic
-from ..runtime.scene import Scene
+from ..runtime.base import parallel
+from ..runtime.run import simulation
+from ..runtime.run.output import write_json_atomic
+from ..runtime.scene.scene import Scene
 from .machine import machine_info
 
 __all__ = ["run_history_bench", "add_history_command"]

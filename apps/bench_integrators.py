@@ -23,12 +23,12 @@ import time
 
 import numpy as np
 
-from ..runtime.assembly import assemble
-from ..runtime.integrators import Context, stable_time_step
-from ..runtime.model import Model
-from ..runtime.output import write_json_atomic
-from ..runtime.scene import Fixed, Loads, Material, MeshSpec, Output, Probe, Scene, Solver
-from ..runtime.simulation import Simulation
+from ..runtime.assembly.assembly import assemble
+from ..runtime.physics.integrators import Context, stable_time_step
+from ..runtime.model.model import Model
+from ..runtime.run.output import write_json_atomic
+from ..runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Output, Probe, Scene, Solver
+from ..runtime.run.simulation import Simulation
 from .machine import machine_info
 
 SIZE = (1.2, 0.2, 0.2)

@@ -14,7 +14,7 @@ the organ scaled 2.2x, semi-axes 88 x 66 x 66 mm, meshed by tensormass.apps.orga
                              Newton iteration of a real run
 
 Every case runs through the public API (Scene from TOML text, Simulation.run)
-once per linear solver of `tensormass.runtime.solvers.METHODS` (read at run time;
+once per linear solver of `tensormass.runtime.solve.solvers.METHODS` (read at run time;
 a solver whose module reports it unavailable is skipped) and per thread count,
 each in a fresh subprocess with TENSORMASS_THREADS set, so that no run inherits
 another's caches, factors or thread pools.  Reported per run: total wall time
@@ -34,10 +34,10 @@ and default linear solver (SciPy spsolve) to tensormass' convergence test
 (|residual on free dofs| <= 1e-8 max(|load on free dofs|, |reactions|)).  The report
 gives FElupe's Newton time over ours and the probe of both.
 
-The meshes are generated once into the user cache (runtime.cache.cache_dir()/organ,
+The meshes are generated once into the user cache (runtime.base.cache.cache_dir()/organ,
 named by the script's hash and the options; gmsh runs single-threaded, so the
 same options give the same file).  Without gmsh the command stops with a message
-saying how to install it.  A case whose memory estimate (runtime.resources) is
+saying how to install it.  A case whose memory estimate (runtime.scene.resources) is
 above what the machine has is skipped with a note.
 """
 from __future__ import annotations
@@ -55,8 +55,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime.errors import TensormassError
-from ..runtime.output import write_json_atomic
+from ..runtime.base.errors import TensormassError
+from ..runtime.run.output import write_json_atomic
 from .machine import format_machine, machine_info
 
 MAKE_ORGAN = Path(__file__).resolve().with_name("organ_mesh.py")      # the mesh maker (its hash names the meshes)
@@ -65,7 +65,7 @@ E, NU, DENSITY = 5.0e3, 0.45, 1050.0
 GRAVITY = (0.0, 0.0, -9.81)
 TRACTION = (0.0, 0.0, -400.0)
 DT = 0.01
-NEWTON_TOLERANCE = 1e-8                # the scene default (runtime.scene.Solver.newton_tolerance)
+NEWTON_TOLERANCE = 1e-8                # the scene default (runtime.scene.scene.Solver.newton_tolerance)
 RESULT_TAG = "TM-ORGAN-RESULT "
 DEFAULT_THREADS = (1, 2)
 DEFAULT_TIMEOUT = 900.0
@@ -129,7 +129,7 @@ def require_gmsh() -> None:
 
 def mesh_path(case: Case, folder: Path | None = None) -> Path:
     """Where the case's mesh lives in the cache (named by the script's hash and the options)."""
-    from ..runtime.cache import cache_dir
+    from ..runtime.base.cache import cache_dir
     digest = hashlib.sha256(MAKE_ORGAN.read_bytes()).hexdigest()[:12]
     folder = Path(folder) if folder is not None else cache_dir() / "organ"
     return folder / f"organ-{digest}-x{case.scale:g}-h{1e3 * case.size:g}mm-o{case.order}.msh"
@@ -141,7 +141,7 @@ def organ_mesh(case: Case, folder: Path | None = None) -> tuple[Path, float]:
     if path.is_file():
         return path, 0.0
     require_gmsh()
-    from ..runtime.cache import writable_cache_dir
+    from ..runtime.base.cache import writable_cache_dir
     writable_cache_dir(path.parent, "bench organ (the organ meshes)")
     maker = load_make_organ()
     t0 = time.perf_counter()
@@ -204,19 +204,19 @@ def probe_point(case: Case) -> tuple:
 
 def make_scene(text: str, method: str):
     """Scene from TOML text with [solver] linear = method (the scene keys take every solvers.METHODS name)."""
-    from ..runtime.scene import Scene
+    from ..runtime.scene.scene import Scene
     text = re.sub(r'(?m)^linear = .*\n', "", text)
     return Scene.from_string(text.replace('[solver]\n', f'[solver]\nlinear = "{method}"\n', 1))
 
 
 def available_solvers(requested=None) -> tuple[list, dict]:
     """(methods to run, {method: why skipped}) from solvers.METHODS, read now."""
-    from ..runtime import solvers
+    from ..runtime.solve import solvers
     methods, skipped = [], {}
     offered = list(solvers.METHODS)
     for name in (requested or offered):
         if name not in offered:
-            raise TensormassError(f"unknown linear solver {name!r}; runtime.solvers offers {', '.join(offered)}")
+            raise TensormassError(f"unknown linear solver {name!r}; runtime.solve.solvers offers {', '.join(offered)}")
         reason = solvers.unavailable(name)
         if reason:
             skipped[name] = reason
@@ -242,7 +242,7 @@ def _threads_in_use() -> dict:
     import numba
     out = {"numba": int(numba.get_num_threads())}
     try:
-        from ..runtime import parallel
+        from ..runtime.base import parallel
         out["runtime"] = int(parallel.worker_threads())
     except (ImportError, AttributeError):
         out["runtime"] = None                    # the runtime's thread switch is not there (yet)
@@ -251,7 +251,7 @@ def _threads_in_use() -> dict:
 
 def run_tensormass(spec: dict) -> dict:
     """One configuration, in this process: Simulation.run of the case's scene with the given solver."""
-    from ..runtime.simulation import Simulation
+    from ..runtime.run.simulation import Simulation
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), spec["method"])
     t0 = time.perf_counter()
@@ -289,7 +289,7 @@ def run_felupe(spec: dict) -> dict | None:
         import felupe as fem
     except ImportError:
         return None
-    from ..runtime.model import Model
+    from ..runtime.model.model import Model
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), "auto")
     model = Model.from_scene(scene)                  # not timed: only the mesh, the clamp and the loads
@@ -373,8 +373,8 @@ def _subprocess(role: str, spec: dict, threads: int | None, timeout: float) -> d
 
 # -- the benchmark ----------------------------------------------------------------------------
 def _memory_note(text: str, method: str) -> str | None:
-    """A note when the run's memory estimate exceeds what the machine can give (runtime.resources)."""
-    from ..runtime import resources
+    """A note when the run's memory estimate exceeds what the machine can give (runtime.scene.resources)."""
+    from ..runtime.scene import resources
     try:
         scene = make_scene(text, method)          # reading the scene checks the estimate already
         resources.check(resources.estimate(scene), None, what="this case")
@@ -570,7 +570,7 @@ def format_organ_report(report: dict) -> str:
             "(setup excluded on both sides), per it: the same per Newton iteration; peak MB: the process's peak resident memory."]
     used = [r.get("threads_in_use") for e in report["cases"] for r in e["runs"] if r.get("threads_in_use")]
     if used and all(t.get("runtime") is None for t in used):
-        notes.append("this runtime has no thread switch (runtime.parallel): TENSORMASS_THREADS was ignored, "
+        notes.append("this runtime has no thread switch (runtime.base.parallel): TENSORMASS_THREADS was ignored, "
                      f"numba ran with {sorted({t['numba'] for t in used})} thread(s) in every run")
     if notes:
         out += [""] + notes
@@ -601,7 +601,7 @@ def add_organ_command(bench_subparsers) -> None:
                    help=f"cases to run (default: {' '.join(c.name for c in CASES)}; quick: "
                         f"{' '.join(c.name for c in QUICK_CASES)})")
     p.add_argument("--solvers", nargs="+", metavar="NAME", help="linear solvers (default: every one of "
-                   "runtime.solvers.METHODS that is available)")
+                   "runtime.solve.solvers.METHODS that is available)")
     p.add_argument("--threads", nargs="+", type=int, metavar="N", help="thread counts (default: 1 2)")
     p.add_argument("--no-felupe", action="store_true", help="do not run FElupe even when it is installed")
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="S",

@@ -1,5 +1,5 @@
-"""Setup-time benchmark of the sparsity pattern: runtime.pattern's numba build against the sort-based
-build it replaced (runtime.pattern._ReferencePattern), in the same run.
+"""Setup-time benchmark of the sparsity pattern: runtime.assembly.pattern's numba build against the sort-based
+build it replaced (runtime.assembly.pattern._ReferencePattern), in the same run.
 
     python -m tensormass.apps.bench_pattern [--repeats 5] [--json bench_pattern.json] [--quick]
 
@@ -23,9 +23,9 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..runtime import assembly
-from ..runtime.output import write_json_atomic
-from ..runtime.pattern import SparsePattern, _ReferencePattern
+from ..runtime.assembly import assembly
+from ..runtime.run.output import write_json_atomic
+from ..runtime.assembly.pattern import SparsePattern, _ReferencePattern
 
 __all__ = ["main", "run_pattern_bench", "scene_dict"]
 
@@ -81,9 +81,9 @@ def _check_same(model) -> None:
 
 
 def run_pattern_bench(repeats: int = 5, quick: bool = False, progress=print) -> dict:
-    from ..runtime.scene import Scene
-    from ..runtime.integrators import Context
-    from ..runtime.model import Model
+    from ..runtime.scene.scene import Scene
+    from ..runtime.physics.integrators import Context
+    from ..runtime.model.model import Model
 
     report = {"repeats": repeats, "cases": {}}
     for element, cells in (QUICK if quick else MESHES).items():

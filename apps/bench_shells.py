@@ -5,7 +5,7 @@ section 4.7 material) resting on its clamped bottom cap under gravity and an inw
 50 Pa, run through the public API (Scene, Simulation) for a few implicit Euler steps (dt = 1/60 s).
 Rows: the co-rotational shell with 1 and 2 threads, and the linear shell (corotational = 0: the
 generated kernel alone, assembled by the compiled fused path) as the baseline measured in the same
-run.  Also reported: the DSATUR colour count of the triangles (runtime/colouring.py; what a
+run.  Also reported: the DSATUR colour count of the triangles (runtime/assembly/colouring.py; what a
 colour-parallel assembly would run in sequence) and the thesis' 1.2-1.4 s per frame for 10 000
 triangles (2013 hardware) as the floor to beat.  Each row: ms per step over the run's steps after
 setup (best of `repeats`), the assembly's share, Newton iterations.
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import time
 
-from ..runtime import parallel
-from ..runtime.errors import TensormassError
-from ..runtime.output import write_json_atomic
+from ..runtime.base import parallel
+from ..runtime.base.errors import TensormassError
+from ..runtime.run.output import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_shells_bench", "add_shells_command", "THESIS_S_PER_FRAME"]
@@ -60,8 +60,8 @@ point = [0.0, 0.0, 1.0]
 
 
 def _measure(subdivisions, corotational, threads, repeats) -> dict:
-    from ..runtime.scene import Scene
-    from ..runtime.simulation import Simulation
+    from ..runtime.scene.scene import Scene
+    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         parallel.set_threads(threads)
@@ -84,8 +84,8 @@ def _measure(subdivisions, corotational, threads, repeats) -> dict:
 
 
 def colour_count(subdivisions) -> dict:
-    from ..runtime import surfaces
-    from ..runtime.colouring import colour_cells
+    from ..runtime.mesh import surfaces
+    from ..runtime.assembly.colouring import colour_cells
     _, triangles = surfaces.icosphere(1.0, subdivisions)
     return {method: int(colour_cells(triangles, method=method).max()) + 1 for method in ("dsatur", "greedy")}
 

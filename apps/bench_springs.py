@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import time
 
-from ..runtime import parallel
-from ..runtime.errors import TensormassError
-from ..runtime.output import write_json_atomic
+from ..runtime.base import parallel
+from ..runtime.base.errors import TensormassError
+from ..runtime.run.output import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_springs_bench", "add_springs_command", "MODELS"]
@@ -77,8 +77,8 @@ point = [{size[0]}, {size[1] / 2}, {size[2] / 2}]
 
 
 def _measure(model: str, kind: str, n: int, element: str, backend: str, repeats: int) -> dict:
-    from ..runtime.scene import Scene
-    from ..runtime.simulation import Simulation
+    from ..runtime.scene.scene import Scene
+    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         sim = Simulation(Scene.from_string(scene_text(model, kind, n, element, backend)), output=False)

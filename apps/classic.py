@@ -33,7 +33,7 @@ from numba import njit
 from .. import laws
 from ..generator.elements import element as reference
 from ..generator.quadrature import rule
-from ..runtime.errors import DegenerateElementError, InvertedElementError, TensormassError
+from ..runtime.base.errors import DegenerateElementError, InvertedElementError, TensormassError
 
 LAWS = {"hooke": 0, "stvk": 1, "neohookean": 2}
 HOOKE, STVK, NEOHOOKEAN = 0, 1, 2

@@ -39,9 +39,8 @@ from ..generator.catalogue import catalogue_laws, entries
 from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
 from ..generator import shape_tables, volumetric
-from ..runtime.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped,
-                              TensormassError)
-from ..runtime.output import check_writable
+from ..runtime.base.errors import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped, TensormassError
+from ..runtime.run.output import check_writable
 from .batch import add_batch_command
 from .bench import add_bench_command
 from .commands import add_commands
@@ -88,7 +87,7 @@ def cmd_generate(args) -> int:
         return check(selected, backends)
     out = _output_folder(args.out)
     generate_all(selected, backends, out, constants=args.constants)
-    shape_tables.write(out)                # N, dN/dxi for consistent loads and masses (runtime/loads.py)
+    shape_tables.write(out)                # N, dN/dxi for consistent loads and masses (runtime/assembly/loads.py)
     volumetric.write(out)                  # U(theta) of every law, for the locking-free formulations
     if "numba" in backends and not args.no_compile and args.constants == "precompute":
         report_numba_compile_times(selected, out)

@@ -21,8 +21,8 @@ import time
 from importlib import resources
 from pathlib import Path
 
-from ..runtime.errors import RunInterrupted, RunStopped, TensormassError
-from ..runtime.scene import Scene, picture_field
+from ..runtime.base.errors import RunInterrupted, RunStopped, TensormassError
+from ..runtime.scene.scene import Scene, picture_field
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
            "DEMO_OUT", "print_advice"]
@@ -79,7 +79,7 @@ def _simulation_class():
     """The runtime's Simulation. Deferred import: the simulation stack (assembly, solvers,
     integrators: ~0.2 s) loads only once a checked scene runs, not at every CLI start."""
     try:
-        from ..runtime.simulation import Simulation
+        from ..runtime.run.simulation import Simulation
     except ImportError as exc:
         raise TensormassError(f"the simulation runtime is not available ({exc})") from None
     return Simulation
@@ -92,7 +92,7 @@ _RUN_FAILURES = (TensormassError, ValueError, ArithmeticError, RuntimeError)
 def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, stream=None,
               overwrite: bool = False) -> dict:
     """Run a validated scene; returns the summary dict (Summary.to_dict() plus format, status,
-    message, exit_code, scene and output), written where runtime.run_files says (the output
+    message, exit_code, scene and output), written where runtime.run.run_files says (the output
     folder's summary.json, and json_path when given): the same files as Simulation(scene).run().
 
     out overrides scene.output.dir; frames go there every scene.output.every steps.
@@ -101,7 +101,7 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     failed, invalid, interrupted) still writes its summary; data["exit_code"] says how it
     ended (0, 3 or 130). Bad input and unwritable outputs raise TensormassError (exit 2).
     """
-    from ..runtime.run_files import RunFiles
+    from ..runtime.run.run_files import RunFiles
     stream = stream if stream is not None else sys.stdout
     files = RunFiles(scene, out=out, json_path=json_path, overwrite=overwrite,
                      dir_from="given on the command line, relative to the working directory" if out is not None else None)
@@ -118,7 +118,7 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
 
 
 def print_advice(lines, stream=None) -> list:
-    """Setup-time advice lines (runtime.advice, as Simulation.advice holds them), one "advice:" line
+    """Setup-time advice lines (runtime.scene.advice, as Simulation.advice holds them), one "advice:" line
     each, before the run; returns the lines."""
     for line in lines:
         print(f"advice: {line}", file=stream if stream is not None else sys.stdout)
@@ -347,7 +347,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
 def cmd_run(args) -> int:
     scene = Scene.from_toml(args.scene, max_memory=getattr(args, "max_memory", None))
     if getattr(args, "threads", None) is not None:       # --threads overrides [solver] threads
-        from ..runtime.parallel import parse_threads
+        from ..runtime.base.parallel import parse_threads
         scene.solver.threads = parse_threads(args.threads, "--threads")
     if getattr(args, "picture", None) is not None:      # --picture [FIELD] / --plot override [output]
         scene.output.picture = picture_field(True if args.picture == "" else args.picture, "--picture")
@@ -409,7 +409,7 @@ _JSON_HELP = ("write the run summary as JSON to this file (also when the run sto
               "is replaced only when it is an earlier summary)")
 
 
-# --max-memory (runtime.resources): the run is refused before allocating when its estimate is above it.
+# --max-memory (runtime.scene.resources): the run is refused before allocating when its estimate is above it.
 _MAX_MEMORY_HELP = ("refuse the run when its estimated peak memory is above SIZE (8G, 500M or bytes; "
                     "default: $TENSORMASS_MAX_MEMORY, else 80%% of the available memory)")
 

@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from ..backends.c.loader import cflags, compiler
-from ..runtime.errors import TensormassError
+from ..runtime.base.errors import TensormassError
 
 
 def machine_info() -> dict:

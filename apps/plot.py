@@ -4,7 +4,7 @@
     tensormass plot run.json -o curves.png --what probes,energy
 
 The summary is the JSON a run writes (`tensormass run SCENE --json run.json`); its per-step
-history is drawn by runtime.curves.plot_history (a panel per group: probes, energy, reactions,
+history is drawn by runtime.run.curves.plot_history (a panel per group: probes, energy, reactions,
 solver). A file that is not a tensormass summary, a missing file, or one without per-step data
 is refused (exit 2) and nothing is written.
 """
@@ -13,14 +13,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..runtime.errors import TensormassError
-from ..runtime.output import SUMMARY_FORMAT, check_png_path, is_summary_file
+from ..runtime.base.errors import TensormassError
+from ..runtime.run.output import SUMMARY_FORMAT, check_png_path, is_summary_file
 
 __all__ = ["add_plot_command", "cmd_plot"]
 
 
 def cmd_plot(args) -> int:
-    from ..runtime.curves import plot_history
+    from ..runtime.run.curves import plot_history
     source = Path(args.summary)
     if not source.exists():
         raise TensormassError(f"plot {source}: no such file")

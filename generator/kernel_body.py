@@ -122,7 +122,7 @@ def stress_record(dim: int) -> dict:
       F    the deformation gradient, dim x dim row-major (F[a][b] at + a * dim + b)
       P    the first Piola-Kirchhoff stress dW/dF, dim x dim row-major (Pa)
       P33  2D only (plane strain, F33 = 1): the out-of-plane stress dW/dF33 (Pa)
-    Every stress and strain field follows from these, law-independently (runtime/fields.py).
+    Every stress and strain field follows from these, law-independently (runtime/physics/fields.py).
     The generated files export this dict in their metadata ("stress_record"); the runtime reads
     it from there, never from here (loading a kernel imports no generator)."""
     offsets, at = {}, 0

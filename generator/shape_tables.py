@@ -8,7 +8,7 @@ gradients dN/dxi (q, k, r) at the points of a quadrature rule, with the weights 
     tensormass generate --check    regenerates it and compares byte for byte with generated/
 
 The shape functions are the generator's own (generator.elements: sympy, from the element table),
-evaluated exactly and rounded once to float64, so the runtime (runtime/loads.py, runtime/mass.py)
+evaluated exactly and rounded once to float64, so the runtime (runtime/assembly/loads.py, runtime/assembly/mass.py)
 needs numpy only.  The rule of each type is exact for the consistent-mass integrand N_a N_b det J
 of an isoparametric element of that type (so also for the load integrand N_a det J, and for the
 face integrand N_a (t1 x t2) of flat or curved faces); see `rule_for`.

@@ -14,7 +14,7 @@ Stages (a shell law is quadratic in its local dofs: small strains, small rotatio
   stress      one "point" (the element) with v = area x thickness, W per v, F = I + grad u of the
               mid-surface (in-plane gradients, world axes) and P the membrane stress (plane
               stress, world axes) at the mid-surface
-The co-rotational formulation for large rotations is the runtime's (runtime/corotational.py): it
+The co-rotational formulation for large rotations is the runtime's (runtime/kernels/corotational.py): it
 applies this kernel's K_bar in the current element frame.
 """
 from __future__ import annotations

@@ -12,7 +12,7 @@ so a law whose bulk part is not a function of one measure is refused with a clea
 W_dev = W|_{p=0} is the law's own kernel with p = 0, so it needs no kernel of its own; theta's
 kernels are those of the measure "laws".  What remains, U and its first two derivatives in theta,
 is printed into generated/volumetric.py (numpy expressions; the runtime's formulations evaluate
-them once per element or node: runtime.volumetric).
+them once per element or node: runtime.assembly.volumetric).
 """
 from __future__ import annotations
 

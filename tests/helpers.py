@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from tensormass.generator.elements import element as reference
-from tensormass.runtime.samples import random_elements
+from tensormass.runtime.base.samples import random_elements
 
 __all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error"]
 

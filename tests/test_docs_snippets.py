@@ -3,7 +3,7 @@
 - ```toml: a whole scene is parsed and validated by the scene parser (Scene.from_string, its mesh
   built or read, paths relative to the checkout's root). A snippet whose first line is
   "# fragment" is part of a scene: it is parsed as TOML, and each of its keys must be a scene key
-  (runtime.scene_keys), so a misspelt key in the documentation fails here too.
+  (runtime.scene.keys), so a misspelt key in the documentation fails here too.
 - ```python: run, in the checkout's root, one snippet after the other in fresh namespaces. A
   snippet whose first line is "# skip: <reason>" (gmsh, long runs) is only compiled.
 
@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 from tensormass import laws
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.scene_keys import KEYS, TABLES
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.scene.keys import KEYS, TABLES
 
 ROOT = Path(__file__).resolve().parents[1]
 FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[A-Za-z0-9_+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$",
@@ -64,7 +64,7 @@ def _check_keys(data, table=""):
             options = {o for o, _, _ in getattr(law, "options", ())}
             assert key in set(law.parameters) | options, f"[[material]] {key}: not a key of law {law.name!r}"
             continue
-        assert key in known, f"{path}: not a scene key (runtime.scene_keys)"
+        assert key in known, f"{path}: not a scene key (runtime.scene.keys)"
         items = value if isinstance(value, list) else [value]
         for item in items:
             if isinstance(item, dict) and path in _TABLE_NAMES:

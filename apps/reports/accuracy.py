@@ -16,7 +16,7 @@ HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py), cylinder (a thick
 under internal pressure in plane strain, prism and hexahedral layers against Lame; cylinder.py) and
 incompressible (Newton iterations at nu = 0.499 on the organ and the cantilever, with FElupe's
 plain-Newton counts where it is installed; incompressible.py).
-results.csv starts with a `benchmark` column, has a `formulation` column (runtime.formulations) and a
+results.csv starts with a `benchmark` column, has a `formulation` column (runtime.physics.formulations) and a
 `case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
 thesis_value (MODEL_COLUMNS);
 `value` is the benchmark's measured quantity (tip deflection in m, volume loss in %).  Each
@@ -73,9 +73,9 @@ import time
 import tomllib
 from pathlib import Path
 
-from ...runtime.errors import TensormassError
-from ...runtime.output import write_bytes_atomic
-from ...runtime.scene import Scene, SceneError
+from ...runtime.base.errors import TensormassError
+from ...runtime.run.output import write_bytes_atomic
+from ...runtime.scene.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook

@@ -26,7 +26,7 @@ import tracemalloc
 
 import numpy as np
 
-from ...runtime.scene import Scene
+from ...runtime.scene.scene import Scene
 from .common import analytic_tip
 from .common import benchmark_row as _row
 from .common import cells_label as _cells
@@ -443,9 +443,9 @@ def cube_run(kind, element, cells, law="hooke", quadrature="gauss2", theta=TORSI
     reaction at a prescribed dof is -f_int = dW/du (assembly.assemble returns f_int = -dW/du).
     """
     # deferred: model, assembly and the simulation stack cost ~0.2 s at every CLI start
-    from ...runtime.assembly import assemble
-    from ...runtime.model import Model
-    from ...runtime.simulation import Simulation
+    from ...runtime.assembly.assembly import assemble
+    from ...runtime.model.model import Model
+    from ...runtime.run.simulation import Simulation
     scene = Scene.from_dict(cube_scene(kind, element, cells, law, quadrature))
     if trace:
         tracemalloc.start()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import tracemalloc
 
-from ...runtime.scene import Scene
+from ...runtime.scene.scene import Scene
 
 # The cantilever of the built-in `accuracy` benchmark (a steel-like bar under its own weight).
 SIZE = (1.2, 0.2, 0.2)
@@ -24,7 +24,7 @@ def analytic_tip(size=SIZE, E=E_MOD, nu=NU, rho=RHO, g=G) -> tuple:
 
 def measure(scene, trace=True) -> tuple:
     """(Summary, tracemalloc peak in MB or nan, Simulation) of one run of a validated scene."""
-    from ...runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
+    from ...runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     if trace:
         tracemalloc.start()
     try:

@@ -43,7 +43,7 @@ COOK_FULL = {"elements": ["quad", "triangle", "triangle6"], "nus": [1.0 / 3.0, 0
              "levels": [2, 4, 8, 16, 32], "reference": 64, "quadrature": "gauss2", "alternating": True}
 COOK_QUICK = {"elements": ["quad", "triangle", "triangle6"], "nus": [1.0 / 3.0, 0.4999],
               "levels": [2, 4], "reference": 8, "quadrature": "gauss2", "alternating": True}
-# each element's formulations: the displacement one and its locking-free one (runtime.formulations)
+# each element's formulations: the displacement one and its locking-free one (runtime.physics.formulations)
 COOK_FORMULATIONS = {"quad": ("displacement", "mean_dilatation"),
                      "triangle": ("displacement", "nodal_pressure", "edge_smoothed"),
                      "triangle6": ("displacement", "mean_dilatation")}

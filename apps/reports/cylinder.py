@@ -13,7 +13,7 @@ Meshes: structured polar grids, n_r x n_theta cells in the quarter (hexahedra; w
 along one diagonal into two prisms), written to a temporary VTU (the inner surface a tagged quad
 group); and, when the gmsh module is installed, gmsh's unstructured triangles of the quarter
 annulus extruded into wedges (the issue's case; rows "gmsh wedge"). Every element runs with each
-formulation runtime.formulations allows it, at nu = 0.3 and 0.499.
+formulation runtime.physics.formulations allows it, at nu = 0.3 and 0.499.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The resolution levels of a scene whose mesh is a file, for `tensormass report accuracy SCENE`.
 
-A generated bar is refined by scaling mesh.cells; a mesh file is refined by runtime.uniform:
+A generated bar is refined by scaling mesh.cells; a mesh file is refined by runtime.mesh.uniform:
 
 * triangle / tetra files: level k is the file's mesh after k passes of red refinement (every edge
   halved: 4^k / 8^k times the cells); swept as the file's element and, raised, as its quadratic
@@ -22,10 +22,10 @@ from __future__ import annotations
 import copy
 
 from ... import elements as _types
-from ...runtime import resources
-from ...runtime.errors import TensormassError
-from ...runtime.scene import Scene
-from ...runtime.uniform import LINEAR_OF, QUADRATIC_OF, refine_uniform, to_linear, to_quadratic
+from ...runtime.scene import resources
+from ...runtime.base.errors import TensormassError
+from ...runtime.scene.scene import Scene
+from ...runtime.mesh.uniform import LINEAR_OF, QUADRATIC_OF, refine_uniform, to_linear, to_quadratic
 
 __all__ = ["FileLevels"]
 
@@ -122,6 +122,6 @@ class FileLevels:
         est = resources.estimate(resources.MeshCounts.of_mesh(mesh), materials=scene.materials, solver=scene.solver,
                                  adapt=scene.adapt)
         resources.check(est, scene.max_memory, what=f"scene {scene.name!r} at level {level}")
-        scene._mesh, scene._estimate = mesh, est        # what Scene.load_mesh caches (runtime.scene_mesh)
+        scene._mesh, scene._estimate = mesh, est        # what Scene.load_mesh caches (runtime.scene.mesh_source)
         scene.validate(mesh)
         return scene

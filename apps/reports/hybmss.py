@@ -24,7 +24,7 @@ dynamics tends to.
                 along the motion in N  (Table 7.5; analytic 3571 / 14285 N, Timoshenko)
   torsion       the 5 m cube, nu = 0.25, bottom clamped, top face turned rigidly by 1 / 45 degrees
                 about the vertical axis through its centre ([[fixed]] rotation); value = the top
-                support's reaction moment about that axis in N m (runtime/reactions.py)
+                support's reaction moment about that axis in N m (runtime/physics/reactions.py)
                 (Table 7.6; analytic 1227 / 55223 N m)
   bending       cantilever 2.4 x 0.4 x 0.4 m, 24 x 4 x 4 and 48 x 8 x 8 cells, E = 10 MPa,
                 nu = 0.25, clamped at x = 0, gravity g = 10 along -z, density RHO_BEND (the thesis
@@ -225,9 +225,9 @@ def _singular_at_rest(data) -> bool:
     volume term (kappa = 0), so its lattice can be singular too and the runtime would not say so."""
     import scipy.sparse.linalg as spla
 
-    from ...runtime.assembly import assemble
-    from ...runtime.model import Model
-    from ...runtime.scene import Scene
+    from ...runtime.assembly.assembly import assemble
+    from ...runtime.model.model import Model
+    from ...runtime.scene.scene import Scene
     m = Model.from_scene(Scene.from_dict(copy.deepcopy(data)))
     _, _, K = assemble(m, np.zeros(m.n_dofs))
     free = np.asarray(m.free_dofs)

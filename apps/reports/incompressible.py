@@ -70,8 +70,8 @@ def _felupe(model, E, nu, tol):
 
 
 def _one(text, probe, label, progress):
-    from ...runtime.errors import TensormassError
-    from ...runtime.scene import Scene
+    from ...runtime.base.errors import TensormassError
+    from ...runtime.scene.scene import Scene
     scene = Scene.from_string(text)
     t0 = time.perf_counter()
     try:

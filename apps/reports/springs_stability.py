@@ -61,7 +61,7 @@ def case_spring_compression(quick):
         name = law if A is None else f"{law} A={A:g}"
         data = compression_scene(law, A, n, steps, dt)
         L = n * CELL
-        from ...runtime.mesh import generate_bar        # deferred: mesh costs ~0.02 s at every CLI start
+        from ...runtime.mesh.bars import generate_bar        # deferred: mesh costs ~0.02 s at every CLI start
         points = generate_bar((L, L, L), (n, n, n), "hexahedron").points
         u0 = 1e-4 * CELL * np.random.default_rng(0).standard_normal(points.shape)
         run = _Run(f"spring compression 20 % {n}^3", name, "implicit_euler", dt, expected, _is(*allowed))

@@ -17,7 +17,7 @@ no contact: the plates are glued to the caps, as in examples/shells/ball_squeeze
     FEM neohookean       tetrahedra, compressible neo-Hookean (finite strain), the same E and nu
     MSS                  tetrahedra, law "mss": a spring on every edge (Van Gelder's E V / l^2)
 
-The tetrahedra are runtime.solids.ball_tetrahedra (a cubed ball, no gmsh): 6 480 tetrahedra and
+The tetrahedra are runtime.mesh.solids.ball_tetrahedra (a cubed ball, no gmsh): 6 480 tetrahedra and
 1 215 nodes at the default divisions = 6, next to the thesis' 6 665.  FEM uses one-point
 (gauss1) tetrahedra, exact for linear ones.
 
@@ -33,7 +33,7 @@ each run ended.
     volume loss     1 - V / V0, V0 the mesh's rest volume (not 4/3 pi R^3: the meshes are
                     inscribed polyhedra).  Tetrahedra: the sum of the current tetrahedron
                     volumes.  Shells: the volume enclosed by the surface
-                    (runtime.volume_constraint.VolumeConstraint.volume).
+                    (runtime.physics.volume_constraint.VolumeConstraint.volume).
     max loss        the largest loss seen after any step
     equator bulge   the mean radial displacement (in the xy plane) of the surface nodes within
                     0.1 R of the equator (|Z| <= 0.1 R), in metres
@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...runtime.output import write_json_atomic, write_text_atomic
+from ...runtime.run.output import write_json_atomic, write_text_atomic
 
 __all__ = ["run_squeeze", "add_squeeze_command", "COLUMNS", "MODELS", "THESIS", "squeeze_scene"]
 
@@ -119,14 +119,14 @@ def _surface(model, family):
     cells = model.mesh.blocks[0].cells
     if family == "shell":
         return cells, np.arange(model.n_points)
-    from ...runtime.solids import boundary_faces
+    from ...runtime.mesh.solids import boundary_faces
     faces = boundary_faces(cells)
     return faces, np.unique(faces)
 
 
 def _tetra_measures(points, tetra, u) -> tuple:
     """(current volume, sum V0 tr(grad u)) of linear tetrahedra."""
-    from ...runtime.solids import tetra_volumes
+    from ...runtime.mesh.solids import tetra_volumes
     x = points + u
     X = points[tetra]
     D0 = np.stack([X[:, i] - X[:, 0] for i in (1, 2, 3)], axis=2)       # columns: rest edges
@@ -144,7 +144,7 @@ class _Volume:
         self.family, self.points = family, model.mesh.points
         self.cells = model.mesh.blocks[0].cells
         if family == "shell":
-            from ...runtime.volume_constraint import VolumeConstraint
+            from ...runtime.physics.volume_constraint import VolumeConstraint
             self.constraint = VolumeConstraint(self.cells, self.points)
             self.rest = self.constraint.rest_volume
         else:
@@ -158,9 +158,9 @@ class _Volume:
 
 def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
     """One model's run and measurements (a row of COLUMNS, without 'what')."""
-    from ...runtime.errors import TensormassError
-    from ...runtime.scene import Scene
-    from ...runtime.simulation import Simulation
+    from ...runtime.base.errors import TensormassError
+    from ...runtime.scene.scene import Scene
+    from ...runtime.run.simulation import Simulation
 
     scene = Scene.from_dict(squeeze_scene(family, law, quadrature, preserve, cfg))
     row = {"model": name, "law": law, "thesis_percent": THESIS.get(name, float("nan"))}
@@ -195,7 +195,7 @@ def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
     top = sim.reactions()["top"]["force"][2] if sim.ctx is not None else float("nan")
     linear, inverted = float("nan"), 0
     if family == "tetra":
-        from ...runtime.solids import tetra_volumes
+        from ...runtime.mesh.solids import tetra_volumes
         linear = _tetra_measures(mesh.points, mesh.blocks[0].cells, u)[1] / volume.rest
         inverted = int((tetra_volumes(mesh.points + u, mesh.blocks[0].cells) <= 0.0).sum())
     row.update({"cells": int(len(mesh.blocks[0].cells)), "nodes": int(model.n_points),

@@ -3,7 +3,7 @@
     rows = run_stability("out", quick=True)     # writes out/stability.csv and out/report.md
 
 Every case runs on a tiny mesh with few steps and ends in one of five outcomes, classified by
-the runtime's own health monitor (runtime/health.py), never by a separate judgement:
+the runtime's own health monitor (runtime/physics/health.py), never by a separate judgement:
 
     stable               the run finished and the monitor trusts it (status "ok": finite, bounded
                          energy and displacement, no inverted element)
@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from ... import laws
-from ...runtime import health
-from ...runtime.errors import TensormassError
-from ...runtime.output import write_text_atomic
-from ...runtime.scene import Material, Scene
+from ...runtime.physics import health
+from ...runtime.base.errors import TensormassError
+from ...runtime.run.output import write_text_atomic
+from ...runtime.scene.scene import Material, Scene
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
 
@@ -123,7 +123,7 @@ class _Run:
 
     def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
         """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
-        from ...runtime.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
+        from ...runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
         try:
             scene = Scene.from_dict(scene_data)
             self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0, output=False)
@@ -260,8 +260,8 @@ def case_poisson(quick):
 
 def _stable_dt(scene_data) -> float:
     # deferred: model and integrators cost ~0.2 s at every CLI start
-    from ...runtime.integrators import Context, stable_time_step
-    from ...runtime.model import Model
+    from ...runtime.physics.integrators import Context, stable_time_step
+    from ...runtime.model.model import Model
     return float(stable_time_step(Context(Model.from_scene(Scene.from_dict(scene_data)))))
 
 
@@ -285,7 +285,7 @@ def case_explicit(quick):
 
 
 def _rest_points(size, cells, element="hexahedron"):
-    from ...runtime.mesh import generate_bar    # deferred: mesh costs ~0.02 s at every CLI start
+    from ...runtime.mesh.bars import generate_bar    # deferred: mesh costs ~0.02 s at every CLI start
     return generate_bar(size, cells, element).points
 
 
@@ -367,8 +367,8 @@ def case_inverted_rest(quick):
     row.update(case="inverted rest element", law="stvk", integrator="static", expected=
                f"refused (...) naming element {element}")
     # deferred: mesh and model cost ~0.05 s at every CLI start
-    from ...runtime.mesh import generate_bar
-    from ...runtime.model import Model
+    from ...runtime.mesh.bars import generate_bar
+    from ...runtime.model.model import Model
     start = time.perf_counter()
     mesh = generate_bar(BAR, (3, 1, 1), "hexahedron")
     cells = mesh.blocks[0].cells
@@ -404,8 +404,8 @@ def case_sliver(quick):
 def case_rotation(quick):
     """8. a rigid 90 deg rotation as the state: Hooke gives ghost forces, finite-strain laws do not."""
     # deferred: model and assembly cost ~0.1 s at every CLI start
-    from ...runtime.assembly import Assembler
-    from ...runtime.model import Model
+    from ...runtime.assembly.assembly import Assembler
+    from ...runtime.model.model import Model
     laws_ = ("hooke", "stvk", "stable_neohookean") if quick else (
         "hooke", "stvk", "neohookean", "stable_neohookean", "mooney_rivlin")
     rows = []

@@ -3,13 +3,13 @@
 Directives (used in the MyST pages of docs/reference/):
 
     ```{tm-scene-keys}
-    ```                      every scene table and key (runtime.scene_keys, checked against the parser)
+    ```                      every scene table and key (runtime.scene.keys, checked against the parser)
     ```{tm-cli}
     ```                      every command and option of `tensormass` (apps.cli.build_parser, walked)
     ```{tm-fields}
-    ```                      the output fields (runtime.fields.FIELDS)
+    ```                      the output fields (runtime.physics.fields.FIELDS)
     ```{tm-catalogue} laws | elements | formulations | kernels
-    ```                      laws/, elements/, runtime.formulations, generated/manifest.json
+    ```                      laws/, elements/, runtime.physics.formulations, generated/manifest.json
 
 Each directive writes Markdown and hands it to the page's own parser (MyST parses nested
 content as Markdown), so the generated tables look like the hand-written ones.
@@ -59,7 +59,7 @@ class _Markdown(Directive):
 # -- scene keys ------------------------------------------------------------------------------------
 
 def _default(key) -> str:
-    from tensormass.runtime.scene_keys import NO_DEFAULT, REQUIRED
+    from tensormass.runtime.scene.keys import NO_DEFAULT, REQUIRED
     if key.default_text is not None:
         return key.default_text
     if key.default == REQUIRED:
@@ -77,7 +77,7 @@ def _default(key) -> str:
 
 
 def scene_key_lines() -> list:
-    from tensormass.runtime.scene_keys import MATERIAL_LAW_PARAMETERS, TABLES, allowed_values, keys_of
+    from tensormass.runtime.scene.keys import MATERIAL_LAW_PARAMETERS, TABLES, allowed_values, keys_of
     out = []
     for table in TABLES:
         title = "top level" if not table.name else (f"[[{table.name}]]" if table.array else f"[{table.name}]")
@@ -158,7 +158,7 @@ class Cli(_Markdown):
 # -- fields --------------------------------------------------------------------------------------------
 
 def field_lines() -> list:
-    from tensormass.runtime.fields import DEFAULT_FIELDS, FIELDS
+    from tensormass.runtime.physics.fields import DEFAULT_FIELDS, FIELDS
     rows = [(_code(f.name), f.unit, f.kind, " and ".join(f"{w} data" for w in f.where),
              "yes" if f.name in DEFAULT_FIELDS else "", f.description) for f in FIELDS.values()]
     return _table(("name", "unit", "kind", "written as", "default", "what it is"), rows)
@@ -204,7 +204,7 @@ def element_lines() -> list:
 
 
 def formulation_lines() -> list:
-    from tensormass.runtime.formulations import FORMULATIONS, LOCKING_FREE
+    from tensormass.runtime.physics.formulations import FORMULATIONS, LOCKING_FREE
     rows = [(_code(name), "every element" if els is None else ", ".join(els),
              ", ".join(e for e, f in LOCKING_FREE.items() if f == name)) for name, els in FORMULATIONS.items()]
     return _table(("formulation", "elements", "the locking-free choice for"), rows)

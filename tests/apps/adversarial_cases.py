@@ -583,7 +583,7 @@ def _sigint_raises():
 
 def _forget_kernels() -> None:
     """Kernels loaded by earlier cases would hide the cache state this case sets up."""
-    from tensormass.runtime import kernels
+    from tensormass.runtime.kernels import kernels
     kernels.load_kernel.cache_clear()
 
 
@@ -1290,16 +1290,16 @@ def _interrupt_cases() -> None:
         hooks=(("interrupt_at", "os:pwrite", 4, True),), min_frames=4)
     add("interrupt", "Ctrl-C twice (again while stopping)", "interrupted", ctrl_c, changes=LONG_RUN,
         hooks=(("interrupt_when", "out/frame_000003.vtu"),
-               ("interrupt_at", "tensormass.runtime.output:Writer.mark_stopped", 1)), min_frames=3)
+               ("interrupt_at", "tensormass.runtime.run.output:Writer.mark_stopped", 1)), min_frames=3)
     add("interrupt", "Ctrl-C while reading the scene", "interrupted", ctrl_c,
-        hooks=(("interrupt_at", "tensormass.runtime.scene:Scene.from_toml", 1),))
+        hooks=(("interrupt_at", "tensormass.runtime.scene.scene:Scene.from_toml", 1),))
     _mesh_case("Ctrl-C while reading the mesh file", "interrupted", ctrl_c,
-               hooks=(("interrupt_at", "tensormass.runtime.mesh:read_mesh", 1),))
+               hooks=(("interrupt_at", "tensormass.runtime.mesh.io:read_mesh", 1),))
     CASES[-1] = Case(**{**CASES[-1].__dict__, "family": "interrupt"})
     add("interrupt", "Ctrl-C while loading kernels", "interrupted", ctrl_c, clear_kernels=True,
-        hooks=(("interrupt_at", "tensormass.runtime.kernels:load_kernel", 1),))
+        hooks=(("interrupt_at", "tensormass.runtime.kernels.kernels:load_kernel", 1),))
     add("interrupt", "Ctrl-C while the summary is written", "interrupted", ctrl_c,
-        hooks=(("interrupt_at", "tensormass.runtime.output:write_json_atomic", 1),))
+        hooks=(("interrupt_at", "tensormass.runtime.run.output:write_json_atomic", 1),))
     add("interrupt", "Ctrl-C while compiling a C kernel", "interrupted", ctrl_c, changes=C_SCENE,
         env=(("TENSORMASS_CACHE", "{tmp}/cache"),), clear_kernels=True,
         hooks=(("interrupt_at", "tensormass.backends.c.loader:_run_measured", 1),))
@@ -1453,7 +1453,7 @@ def _output_cases() -> None:
     add("output", "disk full while appending to the .pvd", err, r"frame\.pvd.*No space left",
         hooks=(("fail", "os:pwrite", 1, "ENOSPC", True),), wrote_before_error=True)
     add("output", "disk full while writing the summary", err, r"summary.*No space left",
-        hooks=(("fail", "tensormass.runtime.output:write_text_atomic", 1, "ENOSPC"),), wrote_before_error=True)
+        hooks=(("fail", "tensormass.runtime.run.output:write_text_atomic", 1, "ENOSPC"),), wrote_before_error=True)
     add("output", "permission lost while writing frames", err, r"frame_000001\.vtu.*Permission denied",
         hooks=(("fail", "meshio:write", 2, "EACCES", True),), wrote_before_error=True)
 

@@ -18,7 +18,7 @@ import pytest
 
 from tensormass.apps import batch
 from tensormass.apps.cli import main
-from tensormass.runtime.errors import SceneError, TensormassError
+from tensormass.runtime.base.errors import SceneError, TensormassError
 
 from test_cli_safety import deny_writes
 
@@ -192,7 +192,7 @@ def test_rows_are_kept_as_they_finish_and_ctrl_c_keeps_them(scene, tmp_path, cap
 
 def test_ctrl_c_in_a_task_stops_the_study(scene, tmp_path, monkeypatch):
     # the runtime turns Ctrl-C into RunInterrupted: a study must stop there, not record the task and go on
-    from tensormass.runtime import simulation
+    from tensormass.runtime.run import simulation
     monkeypatch.setattr(simulation.Simulation, "_loop", lambda self: (_ for _ in ()).throw(KeyboardInterrupt))
     rows, code = batch.run_batch([scene], ["material.0.E=1e8,2e8"], workers=1, out=tmp_path / "t.csv",
                                  progress=False)
@@ -282,7 +282,7 @@ COMPILE = textwrap.dedent("""
     import sys
     from tensormass.apps.batch import kernel_locks
     from tensormass.backends.c import loader
-    from tensormass.runtime.kernels import load_kernel
+    from tensormass.runtime.kernels.kernels import load_kernel
     with kernel_locks([("tetra", "hooke", "gauss1", "c")]):
         kernel = load_kernel("tetra", "hooke", "gauss1", backend="c")
     print(len(loader.COMPILATIONS))

@@ -2,7 +2,7 @@
 import json
 
 from tensormass.apps.cli import main
-from tensormass.runtime import simulation
+from tensormass.runtime.run import simulation
 
 
 def test_quick_history_bench_writes_json(tmp_path, capsys):

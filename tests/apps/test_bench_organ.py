@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from tensormass.apps import bench, bench_organ
-from tensormass.runtime import resources, solvers
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import read_mesh
+from tensormass.runtime.scene import resources
+from tensormass.runtime.solve import solvers
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.io import read_mesh
 
 try:
     import gmsh  # noqa: F401

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 
 from tensormass.apps.bench_shells import run_shells_bench, scene_text
-from tensormass.runtime.scene import Scene
+from tensormass.runtime.scene.scene import Scene
 
 
 def test_quick_bench_writes_rows_ratios_and_colours(tmp_path):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 
 from tensormass.apps.bench_springs import MODELS, run_springs_bench, scene_text
-from tensormass.runtime.scene import Scene
+from tensormass.runtime.scene.scene import Scene
 
 
 def test_quick_bench_writes_ratios_against_the_baselines(tmp_path):

@@ -27,10 +27,13 @@ import pytest
 
 from tensormass.apps import commands
 from tensormass.apps.cli import main
-from tensormass.runtime import kernels, output
-from tensormass.runtime.errors import RunInterrupted, RunStopped
-from tensormass.runtime.mesh import MeshError, generate_bar, read_mesh, to_meshio
-from tensormass.runtime.output import Writer, xml_comment
+from tensormass.runtime.kernels import kernels
+from tensormass.runtime.run import output
+from tensormass.runtime.base.errors import RunInterrupted, RunStopped
+from tensormass.runtime.mesh.container import MeshError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import read_mesh, to_meshio
+from tensormass.runtime.run.output import Writer, xml_comment
 
 SCENE = """
 name = "bar"

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from tensormass import backends
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.kernels import load_kernel
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.kernels.kernels import load_kernel
 
 from helpers import random_elements
 
@@ -76,7 +76,7 @@ def test_constants_layout_from_metadata(element, law, quadrature):
 
 def test_run_path_does_not_import_the_renderer():
     """Loading committed kernels (both backends) imports neither jinja2 nor the printers."""
-    code = ("import sys\nfrom tensormass.runtime.kernels import load_kernel\n"
+    code = ("import sys\nfrom tensormass.runtime.kernels.kernels import load_kernel\n"
             "load_kernel('tetra', 'stvk', 'gauss1', backend='numba')\n"
             "load_kernel('tetra', 'stvk', 'gauss1', backend='c')\n"
             "bad = [m for m in sys.modules if m == 'jinja2' or (m.startswith('tensormass.')"

@@ -12,14 +12,16 @@ from tensormass import elements
 from tensormass.elements import SIMPLEX, ElementType, Face
 from tensormass.generator.elements import ELEMENTS, element
 from tensormass.generator.quadrature import rule
-from tensormass.runtime import mesh as M
-from tensormass.runtime.mesh import CellBlock, Mesh, MeshError, check_mesh, orient_cells, read_mesh
+from tensormass.runtime.mesh import checks, container, faces
+from tensormass.runtime.mesh.container import CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.checks import check_mesh, orient_cells
+from tensormass.runtime.mesh.io import read_mesh
 
 SOLIDS = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
 BUILTIN = SOLIDS + ("shell",)         # shell: a triangle with 6 dofs per node (elements/shell.py)
 FACE_NODES = {"vertex": 1, "line": 2, "line3": 3, "triangle": 3, "triangle6": 6, "quad": 4}
 
-# What runtime/mesh.py, runtime/adapt.py and generator/elements.py restated before the table.
+# What runtime/mesh/mesh.py, runtime/change/adapt.py and generator/elements.py restated before the table.
 OLD_NODES = {"tetra": 4, "tetra10": 10, "hexahedron": 8, "wedge": 6, "pyramid": 5,
              "triangle": 3, "triangle6": 6, "quad": 4, "shell": 3}
 OLD_CORNERS = {"tetra": 4, "tetra10": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5,
@@ -67,12 +69,12 @@ def _ref(t):
 
 def test_registry_names_and_lookups():
     assert elements.names() == BUILTIN == elements.builtin()
-    assert elements.names(dim=3) == ("tetra", "tetra10", "hexahedron", "wedge", "pyramid") == M.SOLID_TYPES_3D
+    assert elements.names(dim=3) == ("tetra", "tetra10", "hexahedron", "wedge", "pyramid") == container.SOLID_TYPES_3D
     assert elements.names(dim=2) == ("triangle", "triangle6", "quad", "shell")
-    assert M.SOLID_TYPES_2D == ("triangle", "triangle6", "quad")          # a shell is no 2D solid
+    assert container.SOLID_TYPES_2D == ("triangle", "triangle6", "quad")          # a shell is no 2D solid
     assert not elements.get("shell").solid and elements.get("shell").dofs_per_node == 6
     assert [t.name for t in elements.by_dim(2)] == list(elements.names(dim=2))
-    assert M.NODES_PER_CELL == OLD_NODES
+    assert container.NODES_PER_CELL == OLD_NODES
     with pytest.raises(ValueError, match="unknown element type 'hexahedron27'"):
         elements.get("hexahedron27")
     with pytest.raises(ValueError, match="already registered"):
@@ -161,15 +163,15 @@ def test_regular_measures(name):
     assert ConvexHull(P).volume == pytest.approx(t.regular_measure, rel=1e-12)
     # the regular element is positively oriented in this node order
     blk = CellBlock(t.linear, [list(range(t.n_corners))])
-    assert np.all(M._sample_dets(P, blk) > 0)
+    assert np.all(faces.sample_dets(P, blk) > 0)
 
 
 @pytest.mark.parametrize("name", SOLIDS)
 def test_flip_mirrors_the_reference_element(name):
     t = elements.get(name)
     X = _ref(t)
-    ok = M._sample_dets(X, CellBlock(name, [list(range(t.n_nodes))]))
-    flipped = M._sample_dets(X, CellBlock(name, [list(t.flip)]))
+    ok = faces.sample_dets(X, CellBlock(name, [list(range(t.n_nodes))]))
+    flipped = faces.sample_dets(X, CellBlock(name, [list(t.flip)]))
     assert np.all(ok > 0) and np.all(flipped < 0)
 
 
@@ -179,7 +181,7 @@ def test_numeric_lagrange_gradients_match_the_closed_forms(name):
     t = elements.get(name)
     corners = np.array(t.corner_nodes, float)
     for q, x in enumerate(list(corners) + [corners.mean(axis=0)]):
-        np.testing.assert_allclose(M._grad_lagrange(t, x), M._gradient_table(t)[q], atol=1e-12)
+        np.testing.assert_allclose(faces._grad_lagrange(t, x), faces._gradient_table(t)[q], atol=1e-12)
 
 
 @pytest.mark.parametrize("name", SOLIDS)
@@ -229,7 +231,7 @@ def test_toy_bar_mesh_checks(bar, tmp_path):
     pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [1, 1, 1.0]])
     m = Mesh(pts, [CellBlock("line", [[0, 1], [1, 2], [2, 3]])])
     check_mesh(m)                                           # lengths, not volumes; no faces to match
-    assert M.boundary_faces(m) == []
+    assert faces.boundary_faces(m) == []
     np.testing.assert_array_equal(orient_cells(m).blocks[0].cells, m.blocks[0].cells)
     with pytest.raises(MeshError, match=r"degenerate cells .* \[1\]"):
         check_mesh(Mesh(np.vstack([pts, pts[2]]), [CellBlock("line", [[0, 1], [2, 4]])]))
@@ -295,9 +297,9 @@ def test_a_new_type_needs_only_its_table_entry(quad9):
     assert rule("quad9", "gauss3").n_points == 9 and ref.volume() == 4
     m = _quad9_mesh()
     check_mesh(m)
-    faces = M.boundary_faces(m)
+    faces = faces.boundary_faces(m)
     assert len(faces) == 6 and all(len(f[2]) == 3 for f in faces)
-    assert sum(M.face_measure(m.points, f[2], 2) for f in faces) == pytest.approx(6.0)
+    assert sum(faces.face_measure(m.points, f[2], 2) for f in faces) == pytest.approx(6.0)
     flipped = Mesh(m.points, [CellBlock("quad9", m.blocks[0].cells[:, list(QUAD9.flip)])])
     with pytest.raises(MeshError, match="inverted"):
         check_mesh(flipped)
@@ -310,6 +312,6 @@ def test_a_new_type_needs_only_its_table_entry(quad9):
 
 def test_a_new_type_gets_a_resource_estimate(quad9):
     """The resource estimate reads node counts from the table too: no table of its own to extend."""
-    from tensormass.runtime import resources
+    from tensormass.runtime.scene import resources
     est = resources.estimate(resources.MeshCounts.of_mesh(_quad9_mesh()))
     assert est.bytes > 0 and est.nodes == 15 and est.cells == {"quad9": 2}

@@ -72,9 +72,9 @@ def test_inverted_element_inside_a_vector_block(law):
 def test_fused_scatter_c_equals_numba(entry):
     """forces_and_stiffness_scatter: C (vector blocks, scalar remainder) = numba, on elements that
     share nodes (so several elements add into the same global entries)."""
-    from tensormass.runtime.assembly import SparsePattern
-    from tensormass.runtime.dofs import node_dofs
-    from tensormass.runtime.fused import block_positions
+    from tensormass.runtime.assembly.assembly import SparsePattern
+    from tensormass.runtime.base.dofs import node_dofs
+    from tensormass.runtime.kernels.fused import block_positions
     numba = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="numba")
     c = tm.load_kernel(entry.element, entry.law, entry.quadrature, backend="c")
     n, k, d = 11, numba.n_nodes, numba.dofs_per_node                      # 2 blocks of 4 + 3

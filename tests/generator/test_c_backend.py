@@ -13,8 +13,8 @@ import tensormass.backends.c.loader as cc
 from tensormass import backends
 from tensormass.generator.catalogue import Entry
 from tensormass.generator.ir import build_ir
-from tensormass.runtime.errors import DegenerateElementError, InvertedElementError, TensormassError
-from tensormass.runtime.kernels import kernel_source, load_kernel
+from tensormass.runtime.base.errors import DegenerateElementError, InvertedElementError, TensormassError
+from tensormass.runtime.kernels.kernels import kernel_source, load_kernel
 
 from helpers import random_elements
 
@@ -133,7 +133,7 @@ ENTRY = Entry("tetra", "stvk", "gauss1")
 
 LOAD = """
 import json
-from tensormass.runtime.kernels import load_kernel
+from tensormass.runtime.kernels.kernels import load_kernel
 m = load_kernel("tetra", "stvk", "gauss1", backend="c").module
 print(json.dumps({"compiled": m.COMPILED, "library": str(m.LIBRARY), "seconds": m.COMPILE_SECONDS}))
 """

@@ -16,7 +16,7 @@ import tensormass as tm
 from tensormass import elements, laws
 from tensormass.generator.catalogue import entries
 from tensormass.laws import springs
-from tensormass.runtime.errors import DegenerateElementError
+from tensormass.runtime.base.errors import DegenerateElementError
 
 from helpers import random_cubes, random_elements, relative_error
 

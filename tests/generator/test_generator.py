@@ -156,7 +156,7 @@ def test_cli_generate_list_and_errors(tmp_path, capsys):
 def test_recompute_constants_mode_matches_precompute(backend):
     """The generator option constants="recompute" (rest coordinates in D) computes the same
     energy, forces and stiffness as the catalogue's precomputed shape gradients."""
-    from tensormass.runtime.kernels import load_recompute_kernel
+    from tensormass.runtime.kernels.kernels import load_recompute_kernel
     from helpers import random_elements
     for name, law, quadrature in [("hexahedron", "neohookean", "gauss2"), ("triangle6", "stvk", "gauss2")]:
         variant = load_recompute_kernel(name, law, quadrature, backend)

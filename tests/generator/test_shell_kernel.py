@@ -18,7 +18,7 @@ import sympy as sp
 
 import tensormass as tm
 from tensormass import laws
-from tensormass.runtime.errors import DegenerateElementError
+from tensormass.runtime.base.errors import DegenerateElementError
 
 from helpers import relative_error
 

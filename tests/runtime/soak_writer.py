@@ -1,12 +1,12 @@
-"""Soak measurement (not a test): ms per frame of runtime.output.Writer over N frames (default 6 000) on a
+"""Soak measurement (not a test): ms per frame of runtime.run.output.Writer over N frames (default 6 000) on a
 small mesh, the median of the first and of the last 200 frames. Constant cost per frame: the two agree.
 
     python tests/runtime/soak_writer.py [N]
 """
 import sys, time, tempfile
 import numpy as np
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.output import Writer
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.run.output import Writer
 
 N = int(sys.argv[1]) if len(sys.argv) > 1 else 6000
 mesh = generate_bar(cells=(4, 2, 2))

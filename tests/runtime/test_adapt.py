@@ -1,4 +1,4 @@
-"""Tests for dynamic adaptation (runtime.adapt): criteria, law switching on masks, constant-K
+"""Tests for dynamic adaptation (runtime.change.adapt): criteria, law switching on masks, constant-K
 assembly, hysteresis, reachable kernels, conforming refinement, VTU fields and scene errors.
 
 Meshes are tiny and every kernel is a committed numba one: the file runs in a few seconds.
@@ -13,15 +13,17 @@ import pytest
 
 import tensormass as tm
 from tensormass import laws
-from tensormass.runtime import kernels as kernels_module
-from tensormass.runtime.adapt import CRITERIA, Adapter, Change, criteria
-from tensormass.runtime.assembly import Assembler
+from tensormass.runtime.kernels import kernels as kernels_module
+from tensormass.runtime.change.adapt import CRITERIA, Adapter, Change, criteria
+from tensormass.runtime.assembly.assembly import Assembler
 from tensormass.apps.commands import run_scene
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.integrators import Context
-from tensormass.runtime.mesh import CellBlock, Mesh, check_mesh, generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Adapt, Fixed, Material, SceneError
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.physics.integrators import Context
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Adapt, Fixed, Material, SceneError
 
 E, NU, RHO = 1e6, 0.3, 800.0
 L, B, H = 1.2, 0.2, 0.2
@@ -641,7 +643,7 @@ def test_refinement_keeps_switched_laws():
     assert new.mesh.n_cells > mesh.n_cells
     # children carry their parent's law
     law_before = model.cell_law()
-    from tensormass.runtime.refine import refine
+    from tensormass.runtime.mesh.refine import refine
     parent = refine(mesh, rotation > 5.0, propagate=True).cell_parent
     np.testing.assert_array_equal(new.cell_law(), law_before[parent])
     assert sum(p.n_active for p in new.parts) == new.mesh.n_cells

@@ -1,4 +1,4 @@
-"""Setup-time advice (runtime.advice) and rank-deficient elements (runtime.hourglass).
+"""Setup-time advice (runtime.scene.advice) and rank-deficient elements (runtime.kernels.hourglass).
 
 Advice never changes a run's status; a static run whose stiffness is singular because of hourglass
 modes is refused before its first step. The bending case: a hexahedral cantilever, one element
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from tensormass import laws
-from tensormass.runtime import advice as adv
-from tensormass.runtime import hourglass
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.scene import Material, Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.scene import advice as adv
+from tensormass.runtime.kernels import hourglass
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.scene.scene import Material, Scene
+from tensormass.runtime.run.simulation import Simulation
 
 
 @pytest.mark.parametrize("element, quadrature, spurious", [
@@ -135,7 +135,7 @@ def test_hourglass_on_a_bending_cantilever():
     # the null space of the clamped bar's stiffness: zero-energy deformations that the constraints leave free
     K = sim.model.parts[0].kernel
     free = sim.model.free_dofs
-    from tensormass.runtime.integrators import Context
+    from tensormass.runtime.physics.integrators import Context
     ctx = Context(sim.model)
     ctx.model.warm_up()
     ctx.asm.warm_up()

@@ -1,4 +1,4 @@
-"""Element-graph colouring (runtime.colouring): valid colourings, DSATUR against first-fit and known
+"""Element-graph colouring (runtime.assembly.colouring): valid colourings, DSATUR against first-fit and known
 chromatic numbers, and the colour-parallel matrix-free product against an assembled scipy matrix."""
 import itertools
 
@@ -8,8 +8,8 @@ import pytest
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
-from tensormass.runtime import colouring as col
-from tensormass.runtime.dofs import node_dofs
+from tensormass.runtime.assembly import colouring as col
+from tensormass.runtime.base.dofs import node_dofs
 
 
 def triangle_grid(n):

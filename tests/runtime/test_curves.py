@@ -1,4 +1,4 @@
-"""runtime.curves: history panels of a run summary, and the PNG they make.
+"""runtime.run.curves: history panels of a run summary, and the PNG they make.
 
 Summaries in the session-6 format (probes, reactions, units) are built here; the summaries
 of today's runtime (step/time/newton/wall/elastic/kinetic/external_work only) are real ones,
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensormass.runtime.curves import history_groups, history_panels, plot_history
-from tensormass.runtime.errors import TensormassError
+from tensormass.runtime.run.curves import history_groups, history_panels, plot_history
+from tensormass.runtime.base.errors import TensormassError
 
 DATA = Path(__file__).resolve().parents[1] / "apps" / "data"
 PIL = pytest.importorskip("PIL.Image")

@@ -9,14 +9,14 @@ import pytest
 
 from tensormass import elements
 from tensormass.elements import SIMPLEX, ElementType, Face
-from tensormass.runtime import custom_kernels
-from tensormass.runtime.dofs import dofs_per_node, split_nodal
-from tensormass.runtime.errors import DegenerateElementError, TensormassError
-from tensormass.runtime.mesh import CellBlock, Mesh
-from tensormass.runtime.model import Model
-from tensormass.runtime.output import Writer
-from tensormass.runtime.scene import Fixed, Loads, Material, NodalLoad, Probe, Solver
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.kernels import custom_kernels
+from tensormass.runtime.base.dofs import dofs_per_node, split_nodal
+from tensormass.runtime.base.errors import DegenerateElementError, TensormassError
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.run.output import Writer
+from tensormass.runtime.scene.scene import Fixed, Loads, Material, NodalLoad, Probe, Solver
+from tensormass.runtime.run.simulation import Simulation
 
 E, NU, AREA, RHO = 2.0e11, 0.3, 1.0e-4, 7800.0
 BIG = 1e3
@@ -327,7 +327,7 @@ def test_scalar_model_refuses_what_it_cannot_mean(spring2d):
     with pytest.raises(TensormassError, match=r"fixed\[0\].components must be in 0..0"):
         Model(mesh, [_material()], fixed=[Fixed(box=_box(pts[0]), components=(1,))], loads=Loads(gravity=(0, 0)))
     with pytest.raises(TensormassError, match=r"\[\[adapt\]\] rules need solid elements"):
-        from tensormass.runtime.scene import Adapt
+        from tensormass.runtime.scene.scene import Adapt
         Model(mesh, [_material()], fixed=fixed, loads=Loads(gravity=(0, 0)),
               adapt=[Adapt(criterion="R_S", threshold=1.0, action="switch_law", law="stvk")])
 
@@ -385,6 +385,6 @@ def test_split_nodal_layouts():
 
 def test_solids_keep_their_layout():
     """A solid mesh: dofs per node = dimension, no registered kernel involved."""
-    from tensormass.runtime.mesh import generate_bar
+    from tensormass.runtime.mesh.bars import generate_bar
     mesh = generate_bar((1.0, 0.2, 0.2), (2, 1, 1), "tetra")
     assert dofs_per_node(mesh) == 3 and custom_kernels.registered() == ()

@@ -14,8 +14,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from tensormass.runtime import solvers
-from tensormass.runtime.solvers import LinearSolver
+from tensormass.runtime.solve import solvers
+from tensormass.runtime.solve.solvers import LinearSolver
 
 sys.path.insert(0, os.path.dirname(__file__))
 from test_solvers import spd_system  # noqa: E402
@@ -147,9 +147,9 @@ point = [1.0, 0.1, 0.1]
 CHILD = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from tensormass.runtime import solvers
-    from tensormass.runtime.scene import Scene
-    from tensormass.runtime.simulation import Simulation
+    from tensormass.runtime.solve import solvers
+    from tensormass.runtime.scene.scene import Scene
+    from tensormass.runtime.run.simulation import Simulation
     names = []
     solve = solvers.LinearSolver.solve
     def logged(self, A, b, x0=None):

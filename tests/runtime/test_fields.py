@@ -1,4 +1,4 @@
-"""Output fields (runtime/fields.py): analytic stresses for every law, von Mises, objectivity,
+"""Output fields (runtime/physics/fields.py): analytic stresses for every law, von Mises, objectivity,
 nodal averaging on a mixed mesh, law switching, the scene key and the VTU frames.
 
 The analytic values come from the laws' closed forms written here with numpy (not from the
@@ -14,13 +14,13 @@ import pytest
 
 from tensormass.apps.commands import run_scene
 from tensormass.backends import KERNEL_FUNCTIONS
-from tensormass.runtime import custom_kernels
-from tensormass.runtime import fields as fm
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.kernels import Kernel, load_kernel
-from tensormass.runtime.mesh import CellBlock, Mesh
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Adapt, Material, Scene
+from tensormass.runtime.kernels import custom_kernels
+from tensormass.runtime.physics import fields as fm
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.kernels.kernels import Kernel, load_kernel
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Adapt, Material, Scene
 
 LAWS = ["hooke", "stvk", "neohookean", "stable_neohookean", "mooney_rivlin"]
 YOUNG, NU = 1000.0, 0.3
@@ -353,7 +353,7 @@ def test_kernels_without_stress_refuse_stress_fields_and_the_default_leaves_them
 def test_reaction_is_reserved_for_runtime_reactions(python_kernels):
     python_kernels("tetra", "hooke")
     model = one_cell("tetra", "hooke")
-    with pytest.raises(TensormassError, match="'reaction' is computed by runtime.reactions"):
+    with pytest.raises(TensormassError, match="'reaction' is computed by runtime.physics.reactions"):
         fm.check_available(model, ["reaction"])
     point, _ = fm.evaluate(model, np.zeros(12), ["reaction"], providers={"reaction": lambda: np.ones((4, 3))})
     assert point["reaction"].shape == (4, 3)
@@ -391,7 +391,7 @@ def test_fields_in_the_vtu_frames_read_back_with_meshio(tmp_path):
 
 def test_simulation_fields_match_the_frames(tmp_path):
     """Simulation.fields() at the end of a run = the last frame's data (same scene, same bits)."""
-    from tensormass.runtime.simulation import Simulation
+    from tensormass.runtime.run.simulation import Simulation
     scene_text = TINY + '[output]\nfields = ["von_mises", "cauchy_stress", "det_F_min", "law"]\n'
     run_scene(Scene.from_string(scene_text), out=tmp_path, quiet=True)
     frame = meshio.read(tmp_path / "frame_000001.vtu")

@@ -1,4 +1,4 @@
-"""Locking-free formulations (runtime.volumetric): exact derivatives, patch and rigid-motion tests
+"""Locking-free formulations (runtime.assembly.volumetric): exact derivatives, patch and rigid-motion tests
 for every formulation x element x law, the split of every law, and that they cure locking."""
 from __future__ import annotations
 
@@ -8,12 +8,13 @@ import pytest
 import tensormass as tm
 from tensormass import laws
 from tensormass.generator.volumetric import split
-from tensormass.runtime.assembly import Assembler
-from tensormass.runtime.formulations import FORMULATIONS
-from tensormass.runtime.mesh import CellBlock, Mesh, generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Material
-from tensormass.runtime.uniform import to_quadratic
+from tensormass.runtime.assembly.assembly import Assembler
+from tensormass.runtime.physics.formulations import FORMULATIONS
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Material
+from tensormass.runtime.mesh.uniform import to_quadratic
 
 CASES = [(form, el) for form, els in FORMULATIONS.items() if els for el in els]
 LAWS = laws.continuum_names()          # discrete laws (springs) have no formulations
@@ -88,8 +89,8 @@ def test_homogeneous_state_same_as_displacement(formulation, element):
     u = (pts @ A.T - pts).ravel()
     assert asm.energy(u) == pytest.approx(ref.energy(u), rel=1e-12)
     assert np.allclose(asm.forces(u), ref.forces(u), rtol=0, atol=1e-12 * np.abs(ref.forces(u)).max())
-    _, cells = tm.runtime.fields.evaluate(model, u, ["cauchy_stress", "energy_density"])
-    _, ref_cells = tm.runtime.fields.evaluate(ref_model, u, ["cauchy_stress", "energy_density"])
+    _, cells = tm.runtime.physics.fields.evaluate(model, u, ["cauchy_stress", "energy_density"])
+    _, ref_cells = tm.runtime.physics.fields.evaluate(ref_model, u, ["cauchy_stress", "energy_density"])
     for name in ("cauchy_stress", "energy_density"):
         assert np.allclose(cells[name], ref_cells[name], rtol=1e-10, atol=1e-12)
 
@@ -285,7 +286,7 @@ def test_an_edited_law_is_split_again(monkeypatch):
     """A law file that no longer matches generated/volumetric.py's hash is split now (sympy), not
     read from the stale table; the result is the same functions for an unchanged energy."""
     from tensormass.generator import volumetric as gen
-    from tensormass.runtime import volumetric as rv
+    from tensormass.runtime.assembly import volumetric as rv
     rv.volumetric_functions.cache_clear()
     monkeypatch.setattr(gen, "law_source_hash", lambda law: "edited")
     try:
@@ -301,8 +302,8 @@ def test_an_edited_law_is_split_again(monkeypatch):
 
 
 def test_advice_names_edge_smoothing_for_triangles():
-    from tensormass.runtime import advice
-    from tensormass.runtime.formulations import locking_free_choice
+    from tensormass.runtime.scene import advice
+    from tensormass.runtime.physics.formulations import locking_free_choice
     assert locking_free_choice("triangle") == "edge_smoothed"
     text = advice._locking("material[0]", Material(E=1.0, nu=0.49), "triangle")
     assert text.endswith('use formulation = "edge_smoothed"')

@@ -1,5 +1,5 @@
 """The fused evaluation and scatter (forces_and_stiffness_scatter of every generated kernel)
-gives exactly the element-buffer path followed by runtime.assembly's serial scatter: the same
+gives exactly the element-buffer path followed by runtime.assembly.assembly's serial scatter: the same
 bits in the global forces and in the CSR values, part after part, on real meshes (shared nodes),
 for both backends."""
 from __future__ import annotations
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime.assembly import SparsePattern, _scatter_matrix, _scatter_vector
-from tensormass.runtime.dofs import node_dofs
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.fused import block_positions, node_block_positions
-from tensormass.runtime.mesh import generate_bar
+from tensormass.runtime.assembly.assembly import SparsePattern, _scatter_matrix, _scatter_vector
+from tensormass.runtime.base.dofs import node_dofs
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.kernels.fused import block_positions, node_block_positions
+from tensormass.runtime.mesh.bars import generate_bar
 
 QUADRATURE = {"tetra": "gauss1", "triangle": "gauss1", "tetra10": "gauss2", "triangle6": "gauss2",
               "hexahedron": "gauss2", "quad": "gauss2", "wedge": "gauss2", "pyramid": "gauss2"}

@@ -1,11 +1,11 @@
-"""Hanging nodes of nested 1:8 hexahedral refinement (runtime.hanging, runtime.topology.refine_hexahedra)."""
+"""Hanging nodes of nested 1:8 hexahedral refinement (runtime.physics.hanging, runtime.mesh.topology.refine_hexahedra)."""
 import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime.hanging import HangingNodes, hanging_nodes
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.topology import box_cells, refine_hexahedra
+from tensormass.runtime.physics.hanging import HangingNodes, hanging_nodes
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.topology import box_cells, refine_hexahedra
 
 
 def _boxes(mesh):

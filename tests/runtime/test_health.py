@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime import simulation as simulation_module
-from tensormass.runtime.errors import RunInterrupted, RunStopped, TensormassError
-from tensormass.runtime.health import min_det_F, safe_norm
-from tensormass.runtime.integrators import Context, stable_time_step
-from tensormass.runtime.model import Model
+from tensormass.runtime.run import simulation as simulation_module
+from tensormass.runtime.base.errors import RunInterrupted, RunStopped, TensormassError
+from tensormass.runtime.physics.health import min_det_F, safe_norm
+from tensormass.runtime.physics.integrators import Context, stable_time_step
+from tensormass.runtime.model.model import Model
 
 
 def bar(law="stvk", kind="implicit_euler", gravity=-9.81, E=1e6, steps=10, dt=0.01, cells=(6, 1, 1),
@@ -94,7 +94,7 @@ def test_energy_growth_stops_an_explicit_blow_up():
 
 def test_energy_check_alone_stops_growth_beyond_the_threshold():
     # the explicit integrator has its own blow-up test; this one guards the balance by itself
-    from tensormass.runtime.health import HealthMonitor
+    from tensormass.runtime.physics.health import HealthMonitor
     model = Model.from_scene(bar(law="hooke", steps=1, extra="max_energy_growth = 10.0"))
     ctx = Context(model)
     monitor = HealthMonitor(ctx, dynamic=True, duration=1.0)

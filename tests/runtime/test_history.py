@@ -1,13 +1,13 @@
-"""Per-step histories (runtime.history): bounded and aligned, every key, CSV, explicit energies."""
+"""Per-step histories (runtime.run.history): bounded and aligned, every key, CSV, explicit energies."""
 import csv
 
 import numpy as np
 import pytest
 
-from tensormass.runtime import simulation as simulation_module
-from tensormass.runtime.history import History, write_history_csv
-from tensormass.runtime.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.run import simulation as simulation_module
+from tensormass.runtime.run.history import History, write_history_csv
+from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
+from tensormass.runtime.run.simulation import Simulation
 
 L, B, H = 1.2, 0.2, 0.2
 RHO, G = 800.0, 9.81

@@ -1,4 +1,4 @@
-"""The generalized-alpha integrator (runtime/integrators.py): energy, order, damping, robustness, input.
+"""The generalized-alpha integrator (runtime/physics/integrators.py): energy, order, damping, robustness, input.
 
 Bodies: the soft cantilever of test_runtime (1.2 x 0.2 x 0.2 m, E = 1 MPa, 800 kg/m^3,
 first bending period ~1.3 s), bent by its own weight and released with the load removed.
@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 
 from tensormass.apps.cli import main
-from tensormass.runtime import integrators, resources
-from tensormass.runtime.assembly import assemble
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.integrators import Context, make_integrator
-from tensormass.runtime.integrators import GeneralizedAlpha, alpha_parameters
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.physics import integrators
+from tensormass.runtime.scene import resources
+from tensormass.runtime.assembly.assembly import assemble
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.physics.integrators import Context, make_integrator
+from tensormass.runtime.physics.integrators import GeneralizedAlpha, alpha_parameters
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
+from tensormass.runtime.run.simulation import Simulation
 
 L, B, H = 1.2, 0.2, 0.2
 CLAMP = Fixed(box=((-1, -1, -1), (0, 1, 1)))
@@ -78,7 +79,7 @@ def test_undamped_release_keeps_its_energy_where_implicit_euler_loses_it(law):
 
 
 def test_consistent_mass_release_keeps_its_energy():
-    # the consistent mass (runtime.mass) in the inertia terms, the Hessian and the starting acceleration
+    # the consistent mass (runtime.assembly.mass) in the inertia terms, the Hessian and the starting acceleration
     u0 = bent("stvk", 5.0)
     alpha, summary = released_energy("stvk", u0, kind="generalized_alpha", steps=200, dt=0.01,
                                      rayleigh=(0.0, 0.0), mass="consistent")

@@ -4,9 +4,9 @@ import re
 import numpy as np
 import pytest
 
-from tensormass.runtime.errors import InvertedElementError, TensormassError
-from tensormass.runtime.kernels import Kernel, load_kernel
-from tensormass.runtime.mesh import generate_bar
+from tensormass.runtime.base.errors import InvertedElementError, TensormassError
+from tensormass.runtime.kernels.kernels import Kernel, load_kernel
+from tensormass.runtime.mesh.bars import generate_bar
 
 BACKENDS = ("numba", "c")
 

@@ -1,4 +1,4 @@
-"""Consistent loads and masses (runtime/loads.py, runtime/mass.py) and the generated shape tables.
+"""Consistent loads and masses (runtime/assembly/loads.py, runtime/assembly/mass.py) and the generated shape tables.
 
 References are computed here independently: closed-form simplex shape functions in numpy and
 Gauss rules from numpy.polynomial.legendre, never the tables under test.
@@ -13,11 +13,11 @@ import pytest
 
 from tensormass import elements
 from tensormass.generator import shape_tables
-from tensormass.runtime import loads
-from tensormass.runtime.mass import element_mass, lump
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Fixed, Loads, Material, NodalLoad, Solver
+from tensormass.runtime.assembly import loads
+from tensormass.runtime.assembly.mass import element_mass, lump
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Fixed, Loads, Material, NodalLoad, Solver
 
 RNG = np.random.default_rng(12)
 
@@ -41,7 +41,7 @@ def _affine(name, seed=0):
 
 
 def test_committed_tables_are_the_generated_ones():
-    committed = Path(loads.__file__).resolve().parents[1] / "generated" / shape_tables.FILE
+    committed = Path(loads.__file__).resolve().parents[2] / "generated" / shape_tables.FILE
     assert committed.read_text() == shape_tables.render()        # byte-identical, deterministic
     data = json.loads(committed.read_text())
     for name in SOLIDS:
@@ -237,7 +237,7 @@ def test_consistent_mass_operator_conserves_mass_and_is_symmetric():
     assert np.linalg.eigvalsh(A.toarray()).min() > 0                     # positive definite
     np.testing.assert_allclose(M.diagonal, A.diagonal())
     # on the assembler's pattern it is the same matrix
-    from tensormass.runtime.assembly import Assembler
+    from tensormass.runtime.assembly.assembly import Assembler
     asm = Assembler(model)
     data = M.add_to(np.zeros(asm.pattern.nnz), asm.pattern, 2.0)
     assert abs(asm.matrix(data) - 2.0 * A).max() < 1e-14 * abs(A).max()
@@ -285,7 +285,7 @@ def _numpy_organ_load(points, cells):
 
 
 def _solve_static(model):
-    from tensormass.runtime.simulation import Simulation
+    from tensormass.runtime.run.simulation import Simulation
     sim = Simulation(model)
     summary = sim.run()
     assert summary["status"] == "ok", summary["message"]
@@ -294,7 +294,7 @@ def _solve_static(model):
 
 @pytest.fixture(scope="module")
 def organ():
-    from tensormass.runtime.scene import Scene
+    from tensormass.runtime.scene.scene import Scene
     scene = Scene.from_string(ORGAN_SCENE)
     model = Model.from_scene(scene)
     pole = int(np.argmin(model.mesh.points[:, 2]))

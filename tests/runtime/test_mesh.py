@@ -1,12 +1,14 @@
-"""Tests for tensormass.runtime.mesh: generators, checks, reading and writing."""
+"""Tests for the mesh wing (runtime.mesh): generators, checks, reading and writing."""
 
 import meshio
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import (GMSH_TO_VTK, NODES_PER_CELL, SOLID_TYPES_2D, SOLID_TYPES_3D, CellBlock, Mesh,
-                                     MeshError, boundary_faces, check_mesh, generate_bar, orient_cells,
-                                     read_mesh, to_meshio)
+from tensormass.runtime.mesh.io import GMSH_TO_VTK, read_mesh, to_meshio
+from tensormass.runtime.mesh.container import NODES_PER_CELL, SOLID_TYPES_3D, CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.bars import SOLID_TYPES_2D, generate_bar
+from tensormass.runtime.mesh.faces import boundary_faces
+from tensormass.runtime.mesh.checks import check_mesh, orient_cells
 
 SIZE3, CELLS3 = (1.0, 0.2, 0.3), (8, 2, 3)
 SIZE2, CELLS2 = (1.0, 0.3), (6, 3)

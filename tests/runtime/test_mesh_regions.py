@@ -8,13 +8,17 @@ import meshio
 import numpy as np
 import pytest
 
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.mesh import MeshError, check_mesh, generate_bar, read_mesh
-from tensormass.runtime.mesh_groups import Group, read_groups
-from tensormass.runtime.model import Model
-from tensormass.runtime.regions import (assign_materials, find_group, known_regions, region_faces, region_nodes)
-from tensormass.runtime.scene import Fixed, Material, NodalLoad, Probe, Scene, Loads
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.mesh.container import MeshError
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import read_mesh
+from tensormass.runtime.mesh.mesh_groups import Group, read_groups
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.mesh.regions import (assign_materials, find_group, known_regions, region_faces,
+    region_nodes)
+from tensormass.runtime.scene.scene import Fixed, Material, NodalLoad, Probe, Scene, Loads
+from tensormass.runtime.run.simulation import Simulation
 
 L, W = 1.0, 0.2
 
@@ -24,7 +28,7 @@ def _node(points, x):
 
 
 def _faces_on(mesh, axis, value):
-    from tensormass.runtime.mesh import boundary_faces
+    from tensormass.runtime.mesh.faces import boundary_faces
     return [f for _, _, f in boundary_faces(mesh) if np.allclose(mesh.points[list(f), axis], value)]
 
 
@@ -228,8 +232,8 @@ def test_region_faces_are_outward_with_the_element_table_node_order(tmp_path):
 def test_boundary_groups_off_the_surface_are_refused(tmp_path):
     m = generate_bar((L, W, W), (4, 1, 1), "tetra")
     # a triangle between two tets inside the body: a face of two cells
-    from tensormass.runtime.mesh import _face_table
-    ft = _face_table(m)
+    from tensormass.runtime.mesh.faces import face_table
+    ft = face_table(m)
     inner = ft.nodes[np.flatnonzero(ft.count[ft.group] == 2)[0], :3]
     path = write_bar(tmp_path / "inner.msh", extra=[("triangle", inner[None])])
     mesh = read_mesh(path)
@@ -266,7 +270,7 @@ def test_cell_sets_and_unnamed_tags():
 
 @pytest.mark.parametrize("share", [1.0, 0.4])
 def test_groups_follow_refinement(bar, share):
-    from tensormass.runtime.refine import refine
+    from tensormass.runtime.mesh.refine import refine
     rng = np.random.default_rng(3)
     marked = rng.random(bar.n_cells) < share
     mesh = bar
@@ -293,7 +297,7 @@ def test_groups_follow_refinement(bar, share):
 
 
 def test_groups_follow_refinement_in_2d():
-    from tensormass.runtime.refine import refine
+    from tensormass.runtime.mesh.refine import refine
     from pathlib import Path
     mesh = read_mesh(Path(__file__).parent / "data" / "msh" / "triangle_v41.msh")
     fine = refine(mesh, np.ones(mesh.n_cells, bool)).mesh

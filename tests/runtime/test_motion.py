@@ -1,4 +1,4 @@
-"""Motions over time (runtime/motion.py): amplitude tables, rigid motions of fixed nodes, loads
+"""Motions over time (runtime/physics/motion.py): amplitude tables, rigid motions of fixed nodes, loads
 that follow amplitudes, their validation, and the two example scenes.
 
 The twisted bar's end face must sit on the rotated positions R(a 90 deg)(X - p) + p at every
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation as ScipyRotation
 
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.model import Model
-from tensormass.runtime.motion import Amplitude, BUILTIN_AMPLITUDES, rotation_matrix
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.physics.motion import Amplitude, BUILTIN_AMPLITUDES, rotation_matrix
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.run.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parents[2]
 L, W = 1.0, 0.1
@@ -362,7 +362,7 @@ def test_a_rigid_motion_sharing_a_dof_with_another_entry_is_refused():
 
 
 def test_boundary_velocity_without_the_step_is_refused_when_boundaries_move():
-    from tensormass.runtime.integrators import Context, make_integrator
+    from tensormass.runtime.physics.integrators import Context, make_integrator
     model = Model.from_scene(Scene.from_dict(bar("implicit_euler", steps=2)))
     integ = make_integrator(Context(model))
     with pytest.raises(TensormassError, match="moving boundaries need boundary_velocity"):

@@ -1,12 +1,13 @@
-"""Broken gmsh .msh files are refused naming the file and the broken part (runtime.msh_check), never
+"""Broken gmsh .msh files are refused naming the file and the broken part (runtime.mesh.msh_check), never
 read in part and never with meshio's own exception."""
 import re
 from pathlib import Path
 
 import pytest
 
-from tensormass.runtime.mesh import MeshError, read_mesh
-from tensormass.runtime.msh_check import check_msh
+from tensormass.runtime.mesh.container import MeshError
+from tensormass.runtime.mesh.io import read_mesh
+from tensormass.runtime.mesh.msh_check import check_msh
 
 DATA = Path(__file__).parent / "data" / "msh"
 

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from tensormass import elements
-from tensormass.runtime.mesh import (GMSH_TO_VTK, CellBlock, Mesh, MeshError, _sample_dets, boundary_faces,
-                                     check_mesh, read_mesh)
-from tensormass.runtime.regions import region_nodes
+from tensormass.runtime.mesh.io import GMSH_TO_VTK, read_mesh
+from tensormass.runtime.mesh.container import CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.faces import sample_dets, boundary_faces
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.regions import region_nodes
 
 DATA = Path(__file__).parent / "data" / "msh"
 FILES = sorted(DATA.glob("*.msh"))
@@ -56,7 +58,7 @@ def test_cells_read_from_gmsh_pass_the_inversion_check_with_positive_volume(path
     mesh = read_mesh(path)
     check_mesh(mesh)                                  # det J > 0 at corners and centroid, conforming
     for blk in mesh.blocks:
-        assert _sample_dets(mesh.points, blk).min() > 0, blk.type
+        assert sample_dets(mesh.points, blk).min() > 0, blk.type
     assert enclosed_volume(mesh) == pytest.approx(VOLUME[mesh.dim], rel=1e-12)
     # physical groups: the volume "body" holds every cell, "side" the x = 0 boundary
     groups = {g.name: g for g in mesh.groups}
@@ -74,11 +76,11 @@ def test_gmsh_prisms_are_mirrored_without_the_conversion():
         raw = meshio.read(path)
         blocks = [CellBlock(cb.type, cb.data) for cb in raw.cells if cb.type in ("wedge", "hexahedron")]
         wedges = next(b for b in blocks if b.type == "wedge")
-        assert np.all(_sample_dets(raw.points, wedges).max(axis=1) < 0)
+        assert np.all(sample_dets(raw.points, wedges).max(axis=1) < 0)
         with pytest.raises(MeshError, match=r"inverted cells .*every wedge cell is inverted: the file's node order"):
             check_mesh(Mesh(raw.points, blocks))
         converted = CellBlock("wedge", wedges.cells[:, GMSH_TO_VTK["wedge"]])
-        assert np.all(_sample_dets(raw.points, converted).min(axis=1) > 0)
+        assert np.all(sample_dets(raw.points, converted).min(axis=1) > 0)
 
 
 def test_no_node_order_hint_when_only_some_cells_are_inverted():

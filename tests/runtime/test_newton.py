@@ -1,4 +1,4 @@
-"""Newton's convergence (runtime.integrators.newton): the round-off floor, the three-field pressure
+"""Newton's convergence (runtime.physics.integrators.newton): the round-off floor, the three-field pressure
 of the locking-free formulations, and the watchdog that lets plain Newton take full steps."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.run.simulation import Simulation
 
 ORGAN = Path(__file__).resolve().parents[2] / "examples" / "organ" / "organ.msh"
 

@@ -6,12 +6,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensormass.runtime.loads import body_force, measure_weights, shape_table
-from tensormass.runtime.mesh import check_mesh, read_mesh
-from tensormass.runtime.model import Model
-from tensormass.runtime.regions import region_faces, region_nodes
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.assembly.loads import body_force, measure_weights, shape_table
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.io import read_mesh
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.mesh.regions import region_faces, region_nodes
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.run.simulation import Simulation
 
 ORGAN = Path(__file__).resolve().parents[2] / "examples" / "organ"
 A, B, C = 0.040, 0.030, 0.030
@@ -55,7 +56,7 @@ def test_the_organ_scene_loads_and_constraints_follow_the_groups():
     assert fixed_nodes.tolist() == region_nodes(mesh, "attached").tolist()
     f = model.f_ext.reshape(-1, 3)
     loaded = region_nodes(mesh, "loaded")
-    # consistent gravity: int N rho g dV over the organ's cells (runtime.loads, checked in test_loads)
+    # consistent gravity: int N rho g dV over the organ's cells (runtime.assembly.loads, checked in test_loads)
     (cells,) = [b.cells for b in mesh.blocks]
     gravity = body_force(mesh.points, {"tetra10": cells}, {"tetra10": 1050.0}, (0.0, 0.0, -9.81))
     weight = model.mass.reshape(-1, 3)[:, 2].sum() * -9.81

@@ -1,14 +1,15 @@
-"""Blocked, colour-ordered, threaded assembly (runtime.assembly, runtime.parallel): the same bytes
+"""Blocked, colour-ordered, threaded assembly (runtime.assembly.assembly, runtime.base.parallel): the same bytes
 for one and two threads, the dense reference for every kind of part, and the one thread switch."""
 import numpy as np
 import pytest
 
-from tensormass.runtime import assembly, parallel
-from tensormass.runtime.assembly import Assembler, _project_psd_reference, project_psd
-from tensormass.runtime.errors import InvertedElementError, TensormassError
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import Adapt, Fixed, Material, Scene, SceneError, Solver
+from tensormass.runtime.assembly import assembly
+from tensormass.runtime.base import parallel
+from tensormass.runtime.assembly.assembly import Assembler, _project_psd_reference, project_psd
+from tensormass.runtime.base.errors import InvertedElementError, TensormassError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Scene, SceneError, Solver
 
 E, NU = 1e6, 0.3
 CLAMP = Fixed(box=((-1, -1, -1), (0, 1, 1)))
@@ -285,8 +286,8 @@ def test_the_assembler_takes_the_fused_path_and_it_equals_the_buffered_one(monke
 def test_the_pattern_by_node_pairs_equals_the_pattern_by_dofs(element, dpn):
     """Node-major dofs: the pattern built from node pairs (a sort of dpn^2 fewer keys) is the one
     built from every dof pair: the same CSR, positions and diagonal."""
-    from tensormass.runtime.assembly import SparsePattern
-    from tensormass.runtime.dofs import node_dofs
+    from tensormass.runtime.assembly.assembly import SparsePattern
+    from tensormass.runtime.base.dofs import node_dofs
     size = (1.0, 0.5, 0.5) if dpn == 3 else (1.0, 0.5)
     cells = (4, 2, 2) if dpn == 3 else (4, 3)
     mesh = generate_bar(size=size, cells=cells, element=element)

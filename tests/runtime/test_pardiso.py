@@ -7,8 +7,8 @@ import pytest
 import scipy.sparse as sp
 
 import tensormass as tm
-from tensormass.runtime import amg, pardiso, solvers
-from tensormass.runtime.solvers import LinearSolver
+from tensormass.runtime.solve import amg, pardiso, solvers
+from tensormass.runtime.solve.solvers import LinearSolver
 
 from test_solvers import grid_laplacian, relres, spd_system
 
@@ -142,8 +142,8 @@ cg_tolerance = 1e-12
 
 
 def test_rigid_body_modes_span_the_stiffness_nullspace():
-    from tensormass.runtime.assembly import assemble
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.assembly.assembly import assemble
+    from tensormass.runtime.model.model import Model
     model = Model.from_scene(_bar_model())
     _, _, K = assemble(model, np.zeros(model.n_dofs))
     modes = amg.rigid_body_modes(model.mesh.points, np.arange(model.n_dofs), model.dofs_per_node)
@@ -155,8 +155,8 @@ def test_rigid_body_modes_span_the_stiffness_nullspace():
 
 
 def test_multigrid_with_rigid_modes_beats_plain_aggregation():
-    from tensormass.runtime.assembly import assemble
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.assembly.assembly import assemble
+    from tensormass.runtime.model.model import Model
     model = Model.from_scene(_bar_model(cells=(24, 4, 4)))
     _, _, K = assemble(model, np.zeros(model.n_dofs))
     free = model.free_dofs
@@ -183,7 +183,7 @@ def test_whole_runs_agree_with_the_band_solver(linear):
 
 
 def test_scene_solver_names_are_the_runtime_methods():
-    from tensormass.runtime.scene import LINEAR_SOLVERS
+    from tensormass.runtime.scene.scene import LINEAR_SOLVERS
     assert LINEAR_SOLVERS == solvers.METHODS
 
 

@@ -1,4 +1,4 @@
-"""The path rule (runtime/paths.py): paths in a scene are relative to the scene file's folder,
+"""The path rule (runtime/base/paths.py): paths in a scene are relative to the scene file's folder,
 paths on the command line to the working directory."""
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ from pathlib import Path
 import meshio
 
 from tensormass.apps.cli import main
-from tensormass.runtime.mesh import generate_bar, to_meshio
-from tensormass.runtime.paths import scene_path
-from tensormass.runtime.scene import Scene
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import to_meshio
+from tensormass.runtime.base.paths import scene_path
+from tensormass.runtime.scene.scene import Scene
 
 SCENE = """
 [mesh]

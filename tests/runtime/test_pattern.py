@@ -1,16 +1,17 @@
-"""runtime.pattern: the numba-built pattern and node-blocked maps are the sort-based build's
+"""runtime.assembly.pattern: the numba-built pattern and node-blocked maps are the sort-based build's
 (_reference_by_nodes, the code they replaced) entry for entry, dtype for dtype."""
 import numpy as np
 import pytest
 
-from tensormass.runtime import pattern as pattern_module
-from tensormass.runtime.assembly import Assembler, SparsePattern
-from tensormass.runtime.dofs import node_dofs
-from tensormass.runtime.fused import block_positions
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.pattern import _ReferencePattern, _reference_by_nodes, _reference_submatrix_map
-from tensormass.runtime.scene import Adapt, Fixed, Material, Solver
+from tensormass.runtime.assembly import pattern as pattern_module
+from tensormass.runtime.assembly.assembly import Assembler, SparsePattern
+from tensormass.runtime.base.dofs import node_dofs
+from tensormass.runtime.kernels.fused import block_positions
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.assembly.pattern import (_ReferencePattern, _reference_by_nodes,
+    _reference_submatrix_map)
+from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Solver
 
 FIELDS = ("indices", "indptr", "diagonal", "_rows")
 
@@ -138,8 +139,8 @@ def _full_positions(model):
 def test_assembler_plans_get_the_blocks_of_the_full_positions_and_couplings_theirs(monkeypatch):
     """Switchable parts (shared tables, active subsets) and a nodal-pressure coupling (patch tables):
     the plans' blocks, block sizes and the couplings' maps are those of the full positions."""
-    monkeypatch.setattr("tensormass.runtime.assembly.MIN_BLOCK", 4)
-    monkeypatch.setattr("tensormass.runtime.assembly.BLOCK_BYTES", 1)
+    monkeypatch.setattr("tensormass.runtime.assembly.assembly.MIN_BLOCK", 4)
+    monkeypatch.setattr("tensormass.runtime.assembly.assembly.BLOCK_BYTES", 1)
     model = Model(generate_bar(size=(1.0, 0.5, 0.5), cells=(4, 2, 2), element="tetra"),
                   [Material(law="hooke", quadrature="gauss1", E=1e6, nu=0.3)],
                   fixed=[Fixed(box=((-1, -1, -1), (0, 1, 1)))], solver=Solver(),
@@ -178,7 +179,7 @@ def test_no_full_positions_on_the_setup_path(monkeypatch):
 
 def test_assembly_is_bit_identical_to_the_old_pattern(monkeypatch):
     """f and K through the new pattern's maps are the bytes the old build's maps gave."""
-    from tensormass.runtime import assembly
+    from tensormass.runtime.assembly import assembly
     model = Model(generate_bar(size=(1.0, 0.5, 0.5), cells=(3, 2, 2), element="tetra10"),
                   [Material(law="stvk", quadrature="gauss2", E=1e6, nu=0.3)])
     u = 1e-3 * np.random.default_rng(2).standard_normal(model.n_dofs)

@@ -1,4 +1,4 @@
-"""runtime.picture: a PNG of the deformed body, coloured by a field, drawn off-screen.
+"""runtime.run.picture: a PNG of the deformed body, coloured by a field, drawn off-screen.
 
 The images are decoded and checked: the asked size, a body that covers a fair part of the
 drawing area, many distinct colours, and (without shading) both ends of the colour map
@@ -10,9 +10,9 @@ import os
 import numpy as np
 import pytest
 
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.picture import render_picture, pyvista_usable, write_picture
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.run.picture import render_picture, pyvista_usable, write_picture
 
 PIL = pytest.importorskip("PIL.Image")
 
@@ -184,7 +184,7 @@ def test_pyvista_when_it_renders(tmp_path, monkeypatch):
 
 def test_fields_as_simulation_gives_them_and_auto_scale(tmp_path):
     """values=(point_fields, cell_fields): the nodal field wins when both have the name."""
-    from tensormass.runtime.picture import auto_scale, pick_field
+    from tensormass.runtime.run.picture import auto_scale, pick_field
     mesh = generate_bar(size=(1.0, 0.2, 0.2), cells=(2, 1, 1), element="hexahedron")
     point = {"von_mises": mesh.points[:, 0].copy()}
     cell = {"von_mises": np.array([7.0, 8.0]), "det_F_min": np.ones(2)}
@@ -209,7 +209,7 @@ def test_picture_of_a_simulation(tmp_path):
     """picture_of_simulation reads the mesh, displacement and fields a Simulation offers."""
     from types import SimpleNamespace
 
-    from tensormass.runtime.picture import picture_of_simulation
+    from tensormass.runtime.run.picture import picture_of_simulation
     mesh = generate_bar(size=(1.0, 0.2, 0.2), cells=(3, 1, 1), element="hexahedron")
     asked = []
 

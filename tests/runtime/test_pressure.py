@@ -1,17 +1,18 @@
-"""Follower pressure (runtime/pressure.py): forces, stiffness by finite differences, work, Newton."""
+"""Follower pressure (runtime/assembly/pressure.py): forces, stiffness by finite differences, work, Newton."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tensormass.runtime import loads
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.integrators import Context, make_integrator
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.pressure import FollowerPressure
-from tensormass.runtime.scene import Fixed, Loads, Material, NodalLoad, PressureLoad, Scene, SceneError, Solver
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.assembly import loads
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.physics.integrators import Context, make_integrator
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.assembly.pressure import FollowerPressure
+from tensormass.runtime.scene.scene import (Fixed, Loads, Material, NodalLoad, PressureLoad, Scene,
+    SceneError, Solver)
+from tensormass.runtime.run.simulation import Simulation
 
 
 def _faces(mesh, box=None):
@@ -103,7 +104,7 @@ def test_small_pressure_acts_like_the_inward_traction():
 def test_newton_converges_quadratically_under_a_large_follower_pressure(monkeypatch):
     """200 Pa on the top face (an open surface) bends the bar by ~35 % of its length: Newton with
     the full pressure stiffness (LU) converges quadratically in the end."""
-    from tensormass.runtime import integrators
+    from tensormass.runtime.physics import integrators
     model = _bar_model("tetra10", 200.0, steps=2)
     assert not model.pressure.closed and not model.pressure.symmetric
     residuals = []

@@ -1,12 +1,12 @@
-"""Point probes (runtime/probes.py): interpolation in the containing cell, and the on-the-body rule."""
+"""Point probes (runtime/mesh/probes.py): interpolation in the containing cell, and the on-the-body rule."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import BAR_ELEMENTS, generate_bar
-from tensormass.runtime.probes import (PROBE_CELL_FRACTION, ProbeError, locate_point, shape_functions,
-                                       surface_distance)
+from tensormass.runtime.mesh.bars import BAR_ELEMENTS, generate_bar
+from tensormass.runtime.mesh.probes import (PROBE_CELL_FRACTION, ProbeError, locate_point, shape_functions,
+    surface_distance)
 from tensormass import elements
 
 SIZE = {3: (1.0, 0.3, 0.2), 2: (1.0, 0.3)}
@@ -54,7 +54,7 @@ def test_curved_quadratic_cells_are_inverted_by_newton():
     ref = np.array([[float(c) for c in q] for q in el.nodes])
     X = ref * [2.0, 1.0, 1.5]
     X[4] += [0.0, -0.1, 0.05]                                           # midside node of edge 01, bent
-    from tensormass.runtime.mesh import CellBlock, Mesh
+    from tensormass.runtime.mesh.container import CellBlock, Mesh
     mesh = Mesh(X, [CellBlock("tetra10", np.arange(10)[None])])
     xi = np.array([0.3, 0.2, 0.25])
     N, _ = shape_functions("tetra10", xi[None])
@@ -110,8 +110,8 @@ def test_a_probe_within_the_tolerance_reads_the_nearest_point_of_the_body():
 
 
 def test_the_model_reports_interpolated_probes_and_refuses_points_off_the_body():
-    from tensormass.runtime.model import Model
-    from tensormass.runtime.scene import Material, Probe
+    from tensormass.runtime.model.model import Model
+    from tensormass.runtime.scene.scene import Material, Probe
     mesh = generate_bar((1.0, 0.2, 0.2), (4, 1, 1), "tetra10")
     mat = [Material(law="hooke", E=1e6, nu=0.3)]
     model = Model(mesh, mat, probes=[Probe("mid", (0.3, 0.05, 0.15))])

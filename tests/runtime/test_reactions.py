@@ -1,14 +1,15 @@
-"""Reaction forces (runtime.reactions): balance with the loads, the twisted bar's torque, dynamics, keys."""
+"""Reaction forces (runtime.physics.reactions): balance with the loads, the twisted bar's torque, dynamics, keys."""
 import math
 
 import numpy as np
 import pytest
 
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.reactions import Reactions
-from tensormass.runtime.scene import (Fixed, Loads, Material, MeshSpec, NodalLoad, PressureLoad, Scene, Solver)
-from tensormass.runtime.motion import Amplitude, Rotation
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.physics.reactions import Reactions
+from tensormass.runtime.scene.scene import (Fixed, Loads, Material, MeshSpec, NodalLoad, PressureLoad, Scene,
+    Solver)
+from tensormass.runtime.physics.motion import Amplitude, Rotation
+from tensormass.runtime.run.simulation import Simulation
 
 L, B, H = 1.2, 0.2, 0.2
 RHO, G = 800.0, 9.81
@@ -130,7 +131,7 @@ def test_dynamic_reactions_balance_the_momentum_change(kind):
         np.testing.assert_allclose(F + loads, (P1 - P0) / dt + damping, atol=1e-6 * scale)
     if kind == "backward_euler":
         # the state evaluation (a = 0) + M a is the step's own residual on the fixed dofs
-        from tensormass.runtime import reactions
+        from tensormass.runtime.physics import reactions
         fixed, ctx = sim.model.fixed_dofs, sim.ctx
         inertia = sim.model.mass_matrix @ ((rows[-1][2] - rows[-2][2]) / dt)
         known = ctx.residual[1]
@@ -140,7 +141,7 @@ def test_dynamic_reactions_balance_the_momentum_change(kind):
 
 
 def test_generalized_alpha_reactions_balance_and_settle_on_the_weight():
-    """The scheme's residual at its intermediate times (runtime.reactions): sum(r) + sum(loads) =
+    """The scheme's residual at its intermediate times (runtime.physics.reactions): sum(r) + sum(loads) =
     sum(M a) at t_{n+1-alpha_m} + alpha sum(M v) at t_{n+1-alpha_f}; heavily damped, the body settles
     and the clamp carries the weight."""
     scene = cantilever("stvk", cells=(4, 1, 1), kind="generalized_alpha", dt=0.04, steps=60, rayleigh=(10.0, 0.0))
@@ -184,7 +185,7 @@ def test_a_dof_held_by_two_entries_counts_for_the_first():
 
 
 def test_reaction_field_is_the_nodal_forces_on_the_supports():
-    from tensormass.runtime.reactions import reaction_field
+    from tensormass.runtime.physics.reactions import reaction_field
     sim = Simulation(cantilever())
     sim.run()
     field = reaction_field(sim)
@@ -249,7 +250,7 @@ def test_scene_keys_reach_the_reactions(tmp_path):
 def test_the_state_evaluation_matches_the_solvers_residual():
     """Outside a step (step 0, a state set from outside) the reactions come from one assembly at the
     state: at a static equilibrium (every load step) it agrees with Newton's residual."""
-    from tensormass.runtime import reactions
+    from tensormass.runtime.physics import reactions
     end = ((L, -1, -1), (L, 1, 1))
     loads = Loads(gravity=(0.0, 0.0, -G), nodal=[NodalLoad(box=end, force=(0, 5.0, 0), kind="traction")],
                   pressure=[PressureLoad(box=((-1, -1, H), (2 * L, 1, H)), value=400.0)])   # top face, clamped edge too
@@ -280,8 +281,8 @@ def test_entries_selecting_mesh_regions(tmp_path):
     from pathlib import Path
     sys.path.insert(0, str(Path(__file__).parent))
     from test_mesh_regions import write_bar
-    from tensormass.runtime.mesh import read_mesh
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.mesh.io import read_mesh
+    from tensormass.runtime.model.model import Model
 
     mesh = read_mesh(write_bar(tmp_path / "bar.msh", element="hexahedron"))
     fixed = [Fixed(box=None, region="clamp", name="clamp"), Fixed(box=None, region="tip", components=(2,), name="tip")]

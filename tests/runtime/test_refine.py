@@ -1,10 +1,12 @@
-"""Tests for tensormass.runtime.refine: conforming longest-edge bisection of triangles and tetrahedra."""
+"""Tests for tensormass.runtime.mesh.refine: conforming longest-edge bisection of triangles and tetrahedra."""
 
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import CellBlock, Mesh, MeshError, check_mesh, generate_bar
-from tensormass.runtime.refine import Refinement, interpolate_nodal, refine
+from tensormass.runtime.mesh.container import CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.refine import Refinement, interpolate_nodal, refine
 
 BARS = {
     "triangle": dict(size=(1.0, 0.3), cells=(6, 3), element="triangle"),

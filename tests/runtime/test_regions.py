@@ -1,4 +1,4 @@
-"""runtime.regions: boxes (with the tolerance), regions, material assignment (first match wins),
+"""runtime.mesh.regions: boxes (with the tolerance), regions, material assignment (first match wins),
 unused materials and conflicting [[fixed]]; the kernel outputs integrators declare; E and nu
 validated once."""
 import numpy as np
@@ -6,14 +6,15 @@ import pytest
 
 from tensormass import laws
 from tensormass.laws import base as laws_base
-from tensormass.runtime import integrators, resources
-from tensormass.runtime.errors import SceneError, TensormassError
-from tensormass.runtime.mesh import CellBlock, Mesh, generate_bar
-from tensormass.runtime.model import Model, assign_materials as model_assign
-from tensormass.runtime.regions import (BOX_TOLERANCE, assign_materials, box_bounds, box_contains, box_tolerance,
-                                        check_unused_materials, material_groups, prescribed_values,
-                                        reachable_laws, region_mask)
-from tensormass.runtime.scene import Adapt, Fixed, Material, Scene, Solver
+from tensormass.runtime.physics import integrators
+from tensormass.runtime.scene import resources
+from tensormass.runtime.base.errors import SceneError, TensormassError
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model, assign_materials as model_assign
+from tensormass.runtime.mesh.regions import (BOX_TOLERANCE, assign_materials, box_bounds, box_contains,
+    box_tolerance, check_unused_materials, material_groups, prescribed_values, reachable_laws, region_mask)
+from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Scene, Solver
 
 
 def tagged_quads() -> Mesh:
@@ -217,7 +218,7 @@ def test_scene_validates_E_and_nu_once_through_laws(monkeypatch):
 
 
 def test_may_cover_without_a_mesh():
-    from tensormass.runtime.regions import may_cover
+    from tensormass.runtime.mesh.regions import may_cover
     assert may_cover(Material(region="all"), "tetra") and may_cover(Material(region=3), "tetra")
     assert may_cover(Material(region="tetra", box=((0, 0, 0), (1, 1, 1))), "tetra")
     assert not may_cover(Material(region="hexahedron"), "tetra")

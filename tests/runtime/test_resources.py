@@ -1,4 +1,4 @@
-"""Resource estimates (runtime.resources): counts without building, limits, refusals before allocating."""
+"""Resource estimates (runtime.scene.resources): counts without building, limits, refusals before allocating."""
 from __future__ import annotations
 
 import tracemalloc
@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from tensormass.apps.cli import main
-from tensormass.runtime import mesh as mesh_module
-from tensormass.runtime import resources
-from tensormass.runtime.mesh import bar_counts, generate_bar, to_meshio
-from tensormass.runtime.resources import MeshCounts, ResourceError, estimate, limit_bytes, parse_size
-from tensormass.runtime.scene import Scene, Solver
+from tensormass.runtime.mesh import bars as mesh_module
+from tensormass.runtime.scene import resources
+from tensormass.runtime.mesh.bars import bar_counts, generate_bar
+from tensormass.runtime.mesh.io import to_meshio
+from tensormass.runtime.scene.resources import MeshCounts, ResourceError, estimate, limit_bytes, parse_size
+from tensormass.runtime.scene.scene import Scene, Solver
 
 GiB = 2 ** 30
 
@@ -61,7 +62,7 @@ def test_counts_of_a_bar_and_of_its_mesh_give_the_same_estimate():
 
 @pytest.mark.parametrize("element", ["hexahedron", "tetra", "tetra10", "wedge", "pyramid"])
 def test_nonzeros_are_estimated_from_above(element):
-    from tensormass.runtime.assembly import SparsePattern
+    from tensormass.runtime.assembly.assembly import SparsePattern
     mesh = generate_bar((1.0, 0.2, 0.2), (12, 3, 3), element)
     dofs = [(b.cells[:, :, None] * 3 + np.arange(3)).reshape(len(b), -1) for b in mesh.blocks]
     nnz = SparsePattern(dofs, mesh.n_points * 3).nnz
@@ -110,7 +111,8 @@ def test_available_memory_reads_the_machine_and_its_cgroup(tmp_path, monkeypatch
 
 def test_constants_mirror_the_runtime():
     """resources copies a few numbers so that it can refuse a scene before numba is imported."""
-    from tensormass.runtime import simulation, solvers
+    from tensormass.runtime.run import simulation
+    from tensormass.runtime.solve import solvers
     assert resources.AUTO_DIRECT_BELOW == solvers.AUTO_DIRECT_BELOW
     assert resources.DIRECT_LIMIT == solvers.DIRECT_LIMIT
     assert resources.AUTO_BAND_WORK_PER_NNZ == solvers.AUTO_BAND_WORK_PER_NNZ
@@ -123,7 +125,7 @@ def test_constants_mirror_the_runtime():
 def test_compact_bodies_are_estimated_with_pardiso_when_mkl_is_there(monkeypatch):
     """A compact body past the band's sweet spot: the estimate counts a nested-dissection factor
     (~12 bytes x 18 n^(4/3)), far below the band's n kd; without MKL, the band as before."""
-    from tensormass.runtime import pardiso
+    from tensormass.runtime.solve import pardiso
     _mkl = pardiso.available()
     counts = resources.MeshCounts(dim=3, nodes=31 ** 3, cells={"tetra": 6 * 30 ** 3}, layers=30.0)
     est = resources.estimate(counts, materials=[], solver=Solver(kind="static"))
@@ -168,8 +170,8 @@ def test_mesh_file_is_refused_right_after_reading(tmp_path, monkeypatch):
 
 
 def test_model_checks_the_limit_before_building(monkeypatch):
-    from tensormass.runtime.model import Model
-    from tensormass.runtime.scene import Material
+    from tensormass.runtime.model.model import Model
+    from tensormass.runtime.scene.scene import Material
     mesh = generate_bar((1.0, 0.2, 0.2), (6, 2, 2))
     monkeypatch.setattr(mesh_module, "check_mesh", lambda m: pytest.fail("checked a refused mesh"))
     with pytest.raises(ResourceError, match="model 'model' needs an estimated"):
@@ -177,7 +179,7 @@ def test_model_checks_the_limit_before_building(monkeypatch):
 
 
 def test_python_api_and_environment(tmp_path, monkeypatch):
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.model.model import Model
     text = ('[mesh]\ngenerate = "bar"\ncells = [4, 1, 1]\n[[material]]\nE = 1e6\nnu = 0.3\n'
             '[[fixed]]\nbox = [[0, 0, 0], [0, 1, 1]]\n')
     path = tmp_path / "s.toml"
@@ -224,8 +226,8 @@ def test_refinement_rounds_grow_the_estimate():
 
 def _warm(data):
     """Load and compile the kernels once, so that the measured run allocates only its arrays."""
-    from tensormass.runtime.integrators import Context, make_integrator
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.physics.integrators import Context, make_integrator
+    from tensormass.runtime.model.model import Model
     small = dict(data, mesh=dict(data["mesh"], cells=[1, 1, 1]))
     model = Model.from_scene(Scene.from_dict(small))
     model.warm_up()
@@ -236,8 +238,8 @@ def _warm(data):
 
 def _measured_peak(data) -> tuple:
     """(traced peak bytes of mesh, model, pattern and two steps; the scene's estimate)."""
-    from tensormass.runtime.integrators import Context, make_integrator
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.physics.integrators import Context, make_integrator
+    from tensormass.runtime.model.model import Model
     scene = Scene.from_dict(data, load_mesh=False, max_memory="64G")
     tracemalloc.start()
     try:
@@ -307,12 +309,12 @@ point = [1.0, 0.1, 0.1]
                                   {"generate": "ball", "element": "tetra", "divisions": 2},
                                   {"generate": "ball", "element": "tetra", "divisions": 5}])
 def test_generated_counts_match_the_generated_meshes(spec):
-    from tensormass.runtime.scene_mesh import ball_mesh, shell_mesh
+    from tensormass.runtime.scene.mesh_source import ball_mesh, shell_mesh
     spec = SimpleNamespace(file=None, origin=(0.0, 0.0, 0.0), radius=1.0, **spec)
     mesh = shell_mesh(spec) if spec.element == "shell" else ball_mesh(spec)
     counts = MeshCounts.of_generated(spec)
     assert (counts.nodes, counts.cells) == (mesh.n_points, {b.type: len(b) for b in mesh.blocks})
-    assert resources.BALL_LAYERS == __import__("tensormass.runtime.solids", fromlist=["LAYERS"]).LAYERS
+    assert resources.BALL_LAYERS == __import__("tensormass.runtime.mesh.solids", fromlist=["LAYERS"]).LAYERS
 
 
 _SHELL = {"law": "cst_dkt", "E": 1e7, "nu": 0.3, "thickness": 0.01, "density": 1000.0}
@@ -326,7 +328,8 @@ _SHELL = {"law": "cst_dkt", "E": 1e7, "nu": 0.3, "thickness": 0.01, "density": 1
      {"law": "mss", "E": 1e6, "nu": 0.25, "density": 1000.0}, "8 GiB"),
 ])
 def test_every_generated_mesh_is_refused_before_it_is_built(mesh, material, limit, monkeypatch):
-    from tensormass.runtime import scene_mesh, solids, surfaces
+    from tensormass.runtime.scene import mesh_source as scene_mesh
+    from tensormass.runtime.mesh import solids, surfaces
     for module, name in ((surfaces, "plate"), (surfaces, "icosphere"), (solids, "ball_tetrahedra"),
                          (mesh_module, "generate_bar")):
         monkeypatch.setattr(module, name, lambda *a, _n=name, **k: pytest.fail(f"{_n}: the mesh was built"))

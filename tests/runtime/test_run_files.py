@@ -8,8 +8,8 @@ import pytest
 
 import tensormass as tm
 from tensormass.apps.cli import main
-from tensormass.runtime.model import Model
-from tensormass.runtime.output import SUMMARY_FORMAT
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.run.output import SUMMARY_FORMAT
 
 SCENE = """
 name = "bar"

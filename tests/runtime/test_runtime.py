@@ -6,16 +6,15 @@ the numba caches are warm.
 import numpy as np
 import pytest
 
-from tensormass.runtime import kernels as kernels_module
-from tensormass.runtime.assembly import Assembler, assemble, project_psd
-from tensormass.runtime.errors import RunStopped, TensormassError
-from tensormass.runtime.integrators import Context, stable_time_step
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
-from tensormass.runtime.scene import (Fixed, Loads, Material, MeshSpec, NodalLoad, Probe, Scene,
-                                      Solver)
-from tensormass.runtime.simulation import Simulation
-from tensormass.runtime.solvers import LinearSolver
+from tensormass.runtime.kernels import kernels as kernels_module
+from tensormass.runtime.assembly.assembly import Assembler, assemble, project_psd
+from tensormass.runtime.base.errors import RunStopped, TensormassError
+from tensormass.runtime.physics.integrators import Context, stable_time_step
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
+from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, NodalLoad, Probe, Scene, Solver
+from tensormass.runtime.run.simulation import Simulation
+from tensormass.runtime.solve.solvers import LinearSolver
 
 # The thesis' cantilever: 1.2 x 0.2 x 0.2 m, clamped at x = 0, under its own weight.
 L, B, H = 1.2, 0.2, 0.2

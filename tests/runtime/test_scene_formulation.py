@@ -1,13 +1,13 @@
-"""`[[material]] formulation = "..."`: parsed, checked against runtime.formulations and the element types
-each material models, and refused with [[adapt]] law switching (runtime.scene_formulation)."""
+"""`[[material]] formulation = "..."`: parsed, checked against runtime.physics.formulations and the element types
+each material models, and refused with [[adapt]] law switching (runtime.scene.formulation_check)."""
 from __future__ import annotations
 
 import re
 
 import pytest
 
-from tensormass.runtime.formulations import FORMULATIONS
-from tensormass.runtime.scene import Scene, SceneError
+from tensormass.runtime.physics.formulations import FORMULATIONS
+from tensormass.runtime.scene.scene import Scene, SceneError
 
 SCENE = """
 [mesh]

@@ -1,4 +1,4 @@
-"""runtime.scene_keys describes exactly the keys the scene parser accepts, with its defaults.
+"""runtime.scene.keys describes exactly the keys the scene parser accepts, with its defaults.
 
 The parser is asked, not read: a key it does not know is refused with the list of the keys the
 table allows, and that list must be the table's declared keys.  A key added to the parser
@@ -13,10 +13,10 @@ import re
 import pytest
 
 from tensormass import laws
-from tensormass.runtime import scene as scene_module
-from tensormass.runtime.errors import SceneError
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.scene_keys import KEYS, NO_DEFAULT, REQUIRED, TABLES, allowed_values, keys_of
+from tensormass.runtime.scene import scene as scene_module
+from tensormass.runtime.base.errors import SceneError
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.scene.keys import KEYS, NO_DEFAULT, REQUIRED, TABLES, allowed_values, keys_of
 
 BOX = [[-1e-9, -1, -1], [1e-9, 1, 1]]
 BASE = {

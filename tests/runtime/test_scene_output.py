@@ -16,10 +16,11 @@ import pytest
 
 from tensormass.apps import commands
 from tensormass.apps.commands import ProgressBar, add_commands, demo_text
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import generate_bar, to_meshio
-from tensormass.runtime.output import Writer
-from tensormass.runtime.scene import Scene, SceneError
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import to_meshio
+from tensormass.runtime.run.output import Writer
+from tensormass.runtime.scene.scene import Scene, SceneError
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
@@ -160,10 +161,10 @@ def test_2d_default_element_is_quad():
     assert s.mesh.element == "quad" and s.load_mesh().cell_types() == ["quad"]
 
 
-@pytest.mark.skipif(not (ROOT / "runtime" / "model.py").exists(), reason="runtime/model.py not written yet")
+@pytest.mark.skipif(not (ROOT / "runtime" / "model.py").exists(), reason="runtime/model/model.py not written yet")
 @pytest.mark.parametrize("name", ["mixed_bar", "cantilever_2d_triangle6"])
 def test_material_assignment_matches_the_model(name):
-    from tensormass.runtime.model import assign_materials
+    from tensormass.runtime.model.model import assign_materials
     s = Scene.from_toml(ROOT / "examples" / f"{name}.toml")
     mesh = s.load_mesh()
     for mine, theirs in zip(s.assign_materials(mesh), assign_materials(mesh, s.materials)):
@@ -583,7 +584,7 @@ def test_demo_with_mock_simulation(tmp_path, capsys, monkeypatch):
 
 # ============================================================================== with the real runtime
 
-needs_simulation = pytest.mark.skipif(not HAVE_SIMULATION, reason="runtime/simulation.py not written yet")
+needs_simulation = pytest.mark.skipif(not HAVE_SIMULATION, reason="runtime/run/simulation.py not written yet")
 
 REQUIRED = {"kernels": None, "time": {"setup", "first_step", "assembly", "linear_solve", "total"},
             "iterations": {"newton", "linear"}, "probes": None, "energy": None, "steps": None}

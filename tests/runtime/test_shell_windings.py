@@ -1,13 +1,15 @@
-"""Shell triangles from files: windings made consistent (runtime.surfaces.orient_triangles) or
+"""Shell triangles from files: windings made consistent (runtime.mesh.surfaces.orient_triangles) or
 refused (check_mesh), duplicated cells refused."""
 import numpy as np
 import pytest
 
-from tensormass.runtime import surfaces
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import CellBlock, Mesh, MeshError, check_mesh, generate_bar
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.mesh import surfaces
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.container import CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.run.simulation import Simulation
 
 
 def _every_third_turned(T):

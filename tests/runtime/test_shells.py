@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime.corotational import CorotationalShell, rotation_matrices
-from tensormass.runtime.errors import SceneError
-from tensormass.runtime.scene import Scene
-from tensormass.runtime.simulation import Simulation
+from tensormass.runtime.kernels.corotational import CorotationalShell, rotation_matrices
+from tensormass.runtime.base.errors import SceneError
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.run.simulation import Simulation
 
 E, NU, H = 1.0e7, 0.3, 0.01
 D_PLATE = E * H**3 / (12 * (1 - NU**2))
@@ -155,7 +155,7 @@ def tm_example(name):
 
 def test_shell_masses_carry_rotary_inertia():
     scene = plate_scene(4, "clamped")
-    from tensormass.runtime.model import Model
+    from tensormass.runtime.model.model import Model
     m = Model.from_scene(scene)
     M = m.mass.reshape(-1, 6)
     rho = scene.materials[0].density
@@ -217,7 +217,7 @@ preserve_volume = {str(preserve).lower()}
 
 
 def test_volume_constraint_keeps_a_squeezed_ball_at_its_rest_volume_after_every_step():
-    from tensormass.runtime.volume_constraint import VolumeConstraint
+    from tensormass.runtime.physics.volume_constraint import VolumeConstraint
     volumes = {}
     for preserve in (False, True):
         scene = Scene.from_string(squeezed_ball(preserve))
@@ -246,7 +246,7 @@ def test_volume_constraint_needs_a_closed_shell():
 
 
 def test_corotational_results_do_not_depend_on_the_thread_count():
-    from tensormass.runtime import parallel
+    from tensormass.runtime.base import parallel
     lin = tm.load_kernel("shell", "cst_dkt", "exact", backend="c")
     k = CorotationalShell(lin)
     rng = np.random.default_rng(9)
@@ -265,7 +265,7 @@ def pinched_hemisphere(n, folder):
     nu = 0.3, +-2 N at four equator points), as the usual quarter model with symmetry conditions:
     the radial displacement at the loads is 0.094 (MacNeal-Harder; 0.0924 converged, Simo et al.)."""
     import meshio
-    from tensormass.runtime import surfaces
+    from tensormass.runtime.mesh import surfaces
     P, T = surfaces.hemisphere(10.0, n, 4 * n, hole_degrees=18.0)
     T = T[np.all((P[T][:, :, 0] > -1e-9) & (P[T][:, :, 1] > -1e-9), axis=1)]
     used, inverse = np.unique(T, return_inverse=True)
@@ -356,7 +356,7 @@ def test_a_surface_file_becomes_shells_and_quadratic_surfaces_are_refused(tmp_pa
     """file = ... with element = "shell": the file's triangles (its curves and points left out);
     a quadratic surface is refused by name, with what to do."""
     import meshio
-    from tensormass.runtime import surfaces
+    from tensormass.runtime.mesh import surfaces
     P, T = surfaces.icosphere(1.0, 1)
     path = tmp_path / "ball.vtu"
     meshio.write(path, meshio.Mesh(P, [("triangle", T), ("line", T[:3, :2]), ("vertex", T[:2, :1])]))
@@ -373,7 +373,7 @@ def test_a_surface_file_becomes_shells_and_quadratic_surfaces_are_refused(tmp_pa
 def test_a_probe_between_nodes_interpolates_on_its_triangle():
     """A probe inside a triangle reads the barycentric mean of its nodes' displacements (the shell's
     translations are linear on the triangle); one off the surface is refused naming the probe."""
-    from tensormass.runtime.probes import ProbeError, locate_point
+    from tensormass.runtime.mesh.probes import ProbeError, locate_point
     sim = Simulation(plate_scene(8, "simply"), output=False)
     sim.run()
     mesh = sim.model.mesh

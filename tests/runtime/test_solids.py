@@ -1,13 +1,14 @@
-"""The tetrahedral ball of runtime.solids: valid, good-quality, conforming, on the sphere, converging."""
+"""The tetrahedral ball of runtime.mesh.solids: valid, good-quality, conforming, on the sphere, converging."""
 import math
 
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import CellBlock, Mesh, check_mesh
-from tensormass.runtime.scene import Scene, SceneError
-from tensormass.runtime.solids import ball_tetrahedra, boundary_faces, tetra_quality, tetra_volumes
-from tensormass.runtime.volume_constraint import VolumeConstraint
+from tensormass.runtime.mesh.container import CellBlock, Mesh
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.scene.scene import Scene, SceneError
+from tensormass.runtime.mesh.solids import ball_tetrahedra, boundary_faces, tetra_quality, tetra_volumes
+from tensormass.runtime.physics.volume_constraint import VolumeConstraint
 
 BALL = 4.0 / 3.0 * math.pi
 

@@ -8,8 +8,8 @@ import pytest
 import scipy.sparse as sp
 
 import tensormass as tm
-from tensormass.runtime import solvers
-from tensormass.runtime.solvers import LinearSolver, band_ordering
+from tensormass.runtime.solve import solvers
+from tensormass.runtime.solve.solvers import LinearSolver, band_ordering
 
 
 def grid_laplacian(nx, ny, nz, block=3, shift=0.0):

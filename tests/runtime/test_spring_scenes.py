@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.scene import SceneError
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.scene.scene import SceneError
 
 SCENE = """
 [mesh]

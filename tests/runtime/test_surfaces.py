@@ -1,4 +1,4 @@
-"""Surface generators (runtime/surfaces.py): counts, winding (every triangle's normal checked
+"""Surface generators (runtime/mesh/surfaces.py): counts, winding (every triangle's normal checked
 against the analytic outward normal), areas against the analytic ones, no duplicated nodes, and
 the argument checks."""
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tensormass.runtime import surfaces as S
+from tensormass.runtime.mesh import surfaces as S
 
 
 def normals(points, triangles):

@@ -1,14 +1,15 @@
-"""Topology changes (runtime.topology, runtime.cutting, [[cut]] / [[remove]] scene events)."""
+"""Topology changes (runtime.mesh.topology, runtime.change.cutting, [[cut]] / [[remove]] scene events)."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import tensormass as tm
-from tensormass.runtime import cutting, topology as T
-from tensormass.runtime.assembly import Assembler
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.model import Model
+from tensormass.runtime.change import cutting
+from tensormass.runtime.mesh import topology as T
+from tensormass.runtime.assembly.assembly import Assembler
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.model.model import Model
 
 
 def _pieces(mesh) -> int:
@@ -321,7 +322,7 @@ def test_frames_after_a_cut_have_the_new_points(tmp_path):
 
 def test_a_notched_slab_pulled_apart_tears_through():
     """The tearing example: the notch's front opens first, the tear runs across, the halves separate."""
-    from tensormass.runtime.topology_events import pieces
+    from tensormass.runtime.change.events import pieces
     from pathlib import Path
     path = Path(__file__).parents[2] / "examples" / "cutting" / "slab_tearing.toml"
     sim = tm.Simulation(tm.Scene.from_toml(path), output=False)
@@ -453,7 +454,7 @@ box = [[0.3, -1, -1], [0.7, 1, 0.1]]
 def test_hexahedra_split_one_to_eight_keep_the_patch_test_through_their_hanging_nodes():
     """A uniform stretch is reproduced exactly on a bar whose middle hexahedra were split 1:8 during
     the run; the hanging nodes are constrained (without that, the same mesh is off by 1.4e-3)."""
-    from tensormass.runtime.hanging import hanging_nodes
+    from tensormass.runtime.physics.hanging import hanging_nodes
     sim = _run(PATCH)
     summary = sim.run()
     assert summary.status == "ok", summary.message

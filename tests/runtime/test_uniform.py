@@ -1,4 +1,4 @@
-"""Uniform (red) refinement and order changes of simplicial meshes (runtime/uniform.py)."""
+"""Uniform (red) refinement and order changes of simplicial meshes (runtime/mesh/uniform.py)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,9 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensormass.runtime.mesh import MeshError, check_mesh, generate_bar, read_mesh
-from tensormass.runtime.probes import shape_functions
-from tensormass.runtime.uniform import refine_uniform, to_linear, to_quadratic
+from tensormass.runtime.mesh.container import MeshError
+from tensormass.runtime.mesh.checks import check_mesh
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import read_mesh
+from tensormass.runtime.mesh.probes import shape_functions
+from tensormass.runtime.mesh.uniform import refine_uniform, to_linear, to_quadratic
 
 DATA = Path(__file__).resolve().parents[1] / "apps" / "reports" / "data"
 
@@ -109,7 +112,8 @@ def test_other_cell_types_are_named():
 def test_boundary_faces_kept_as_cells_are_refined_with_the_body():
     """A tetra mesh with its boundary triangles as a block (mesh tags of lower dimension): the refined
     triangles are exactly the boundary faces of the refined tetrahedra (shared new nodes)."""
-    from tensormass.runtime.mesh import CellBlock, Mesh, boundary_faces
+    from tensormass.runtime.mesh.container import CellBlock, Mesh
+    from tensormass.runtime.mesh.faces import boundary_faces
     body = generate_bar((1.0, 0.2, 0.2), (2, 1, 1), "tetra")
     faces = np.array([nodes for _, _, nodes in boundary_faces(body)])
     mesh = Mesh(body.points, body.blocks + [CellBlock("triangle", faces, np.full(len(faces), 9))])

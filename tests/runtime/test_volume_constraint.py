@@ -1,4 +1,4 @@
-"""Volume constraint (runtime/volume_constraint.py): the volume of icospheres against 4/3 pi r^3,
+"""Volume constraint (runtime/physics/volume_constraint.py): the volume of icospheres against 4/3 pi r^3,
 the closed/oriented surface checks, the exact gradient against central differences, the cubic's
 coefficients against the volume at four lam values, the projection after deformations (with held
 nodes and held components bit for bit unchanged), its analytic case (radial directions on a
@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 
-from tensormass.runtime import surfaces as S
-from tensormass.runtime.volume_constraint import (VolumeConstraint, VolumeConstraintError,
-                                                  check_closed_surface)
+from tensormass.runtime.mesh import surfaces as S
+from tensormass.runtime.physics.volume_constraint import (VolumeConstraint, VolumeConstraintError,
+    check_closed_surface)
 
 # unit tetrahedron 0, e1, e2, e3, wound outward
 TET_POINTS = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])

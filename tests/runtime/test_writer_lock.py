@@ -1,4 +1,4 @@
-"""Issue #29 item 6, outputs: one run per output folder (runtime.output.FolderLock), and a frame
+"""Issue #29 item 6, outputs: one run per output folder (runtime.run.output.FolderLock), and a frame
 writer whose bookkeeping per frame does not grow with the frames written before.
 
 The lock is exercised on a tiny bar through the Writer directly and through `tensormass run`
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from tensormass.apps.cli import main
-from tensormass.runtime import output
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import generate_bar
-from tensormass.runtime.output import LOCK_NAME, FolderLock, Writer
+from tensormass.runtime.run import output
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.run.output import LOCK_NAME, FolderLock, Writer
 
 SCENE = """
 name = "bar"
@@ -162,9 +162,9 @@ def test_a_reused_pid_with_another_start_is_stale(tmp_path):
 
 
 def test_the_lock_is_held_until_the_summary_is_written(tmp_path):
-    from tensormass.runtime.run_files import RunFiles
-    from tensormass.runtime.scene import Scene
-    from tensormass.runtime.simulation import Simulation
+    from tensormass.runtime.run.run_files import RunFiles
+    from tensormass.runtime.scene.scene import Scene
+    from tensormass.runtime.run.simulation import Simulation
     scene = Scene.from_string(SCENE, name="bar")
     files = RunFiles(scene, out=tmp_path / "out")
     seen = []

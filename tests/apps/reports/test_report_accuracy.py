@@ -115,7 +115,7 @@ def test_user_scene(tmp_path):
 
 
 def test_user_scene_needs_generated_mesh(tmp_path):
-    from tensormass.runtime.errors import TensormassError
+    from tensormass.runtime.base.errors import TensormassError
     scene = tmp_path / "noprobe.toml"
     scene.write_text(SCENE.split("[[probe]]")[0])
     with pytest.raises(TensormassError, match="probe"):
@@ -211,7 +211,7 @@ def test_mean_dilatation_keeps_the_volume_of_a_compressed_cube():
 
 def test_deformed_volume_of_a_sheared_hexahedron():
     import numpy as np
-    from tensormass.runtime.mesh import generate_bar
+    from tensormass.runtime.mesh.bars import generate_bar
     from tensormass.apps.reports.benchmarks import deformed_volume
     mesh = generate_bar((2.0, 1.0, 1.0), (2, 1, 1), "hexahedron")
     u = np.zeros_like(mesh.points)
@@ -309,7 +309,7 @@ def test_user_scene_settings_sweep(tmp_path):
 
 
 def test_user_scene_settings_cli(tmp_path, monkeypatch):
-    from tensormass.runtime.errors import TensormassError
+    from tensormass.runtime.base.errors import TensormassError
     parser = argparse.ArgumentParser(prog="tensormass")
     sub = parser.add_subparsers(dest="command", required=True)
     add_accuracy_command(sub)

@@ -9,8 +9,9 @@ import meshio
 import pytest
 
 from tensormass.apps.reports.accuracy import COLUMNS, run_accuracy
-from tensormass.runtime.errors import TensormassError
-from tensormass.runtime.mesh import generate_bar, to_meshio
+from tensormass.runtime.base.errors import TensormassError
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.mesh.io import to_meshio
 
 DATA = Path(__file__).resolve().parent / "data"
 ROOT = Path(__file__).resolve().parents[3]

@@ -100,8 +100,8 @@ def test_report_md(quick):
 
 
 def test_min_det_F_matches_kernel():
-    from tensormass.runtime.model import Model
-    from tensormass.runtime.scene import Scene
+    from tensormass.runtime.model.model import Model
+    from tensormass.runtime.scene.scene import Scene
     model = Model.from_scene(Scene.from_dict(stability._scene_dict("stvk", "backward_euler", 0.1, 1, fixed=None)))
     u = np.zeros(model.n_dofs)
     assert min_det_F(model, u) == pytest.approx(1.0)

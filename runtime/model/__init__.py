@@ -1,0 +1,2 @@
+"""The model wing: the Model a scene builds (parts, kernels, constants, loads, constraints, probes).
+Below: base ... scene."""
