@@ -622,5 +622,8 @@ def _worker_main(argv) -> int:
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] in ("--worker", "--felupe-worker"):
         sys.exit(_worker_main(sys.argv[1:]))
-    from .bench import main
-    sys.exit(main(["organ"] + sys.argv[1:]))
+    import argparse
+    parser = argparse.ArgumentParser(prog="python -m tensormass.apps.bench_organ")
+    add_organ_command(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["organ"] + sys.argv[1:])
+    sys.exit(args.run(args))

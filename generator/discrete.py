@@ -28,6 +28,7 @@ import sympy as sp
 
 from .. import laws as laws_pkg
 from . import GENERATOR_VERSION
+from .kernel_ir import KernelIR
 from .constants import hoist
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, count_ops, eliminate, split
@@ -43,7 +44,6 @@ def _s(name):
 
 def build_discrete_ir(element_name: str, law_name: str, max_ops: int = DEFAULT_MAX_OPS, constants="precompute"):
     """The IR of a discrete law's kernel on one element type (quadrature "discrete")."""
-    from .ir import KernelIR
     if constants != "precompute":
         raise ValueError("discrete kernels store their rest geometry as constants: only constants='precompute'")
     law = laws_pkg.get(law_name)

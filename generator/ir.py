@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-from dataclasses import dataclass
 from functools import lru_cache
 from types import SimpleNamespace
 
@@ -23,66 +22,13 @@ from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, split
+from .discrete import QUADRATURE as DISCRETE, build_discrete_ir
 from .kernel_body import build_bodies, stress_record
+from .kernel_ir import KernelIR
 from .quadrature import QuadratureRule, rule as get_rule, rule_for_degree
+from .shell import QUADRATURE as SHELL, build_shell_ir
 
 EXACT = "exact"
-
-
-@dataclass(frozen=True)
-class KernelIR:
-    name: str
-    element: str
-    law: str
-    quadrature: str
-    dim: int
-    n_nodes: int
-    n_points: int
-    parameters: tuple            # native law parameters: inputs of the constants kernel
-    requires_positive_J: bool
-    affine_edges: tuple          # (mid, a, b) node triples checked for straight edges ("exact" only)
-    point_stride: int
-    material_offset: int
-    material_names: tuple        # material constants stored after the geometry
-    constant_names: tuple        # names of every column of D
-    geometry: Fragment           # det J and J^-1 from J (same code at every point)
-    geometry_G: tuple            # ((b, G_b from dn and J^-1), ...) for one node
-    dN_table: tuple              # [point][node][k] reference shape gradients at the points
-    weights: tuple               # quadrature weights
-    material: Fragment           # material constants from the parameters
-    law_code: dict               # variant -> list[Fragment]: energy, gradient, tangent, gradient_tangent, stress
-    J: sp.Expr | None            # det F from the F symbols, for the inversion check
-    chain: dict                  # chain-rule statements (forces, tangent H, stiffness K)
-    rule_points: tuple
-    rule_weights: tuple
-    recompute: bool              # D holds rest coordinates; G and det J are recomputed every call
-    ops: dict                    # floating-point operations per element, per kernel
-    input_hash: str              # hash of element, rule, law source, generator version
-    bodies: dict                 # kind -> statement tree of one element (generator/kernel_body.py)
-    stress_record: dict          # layout of the stress kernel's per-point record (kernel_body.stress_record)
-    source: str = "continuum"    # the energy: a law's W(F), "discrete" (generator/discrete.py: nodal positions)
-    #                              or "shell" (generator/shell.py: nodal displacements and rotations)
-    dofs: int = 0                # unknowns per node; 0: the space dimension (solids)
-
-    @property
-    def dofs_per_node(self) -> int:
-        return self.dofs or self.dim
-
-    @property
-    def point_fields(self) -> dict:
-        """Where each point's fields start in its block of D: v (weight x det J; a discrete kernel's
-        rest measure) and G (shape gradients: not for recompute or discrete kernels)."""
-        if self.recompute:
-            return {}
-        return {"v": 0} if self.source in ("discrete", "shell") else {"v": 0, "G": 1}
-
-    @property
-    def n_dofs(self) -> int:
-        return self.n_nodes * self.dofs_per_node
-
-    @property
-    def n_constants(self) -> int:
-        return len(self.constant_names)
 
 
 def resolve_rule(element_name: str, law, quadrature: str) -> QuadratureRule:
@@ -136,14 +82,12 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         raise ValueError(f"unknown constants mode {constants!r}; use one of {', '.join(CONSTANTS_MODES)}")
     law = laws_pkg.kernel_law(law_name)
     if law.kind == "shell":                     # an energy in nodal displacements and rotations: generator/shell.py
-        from .shell import QUADRATURE as SHELL, build_shell_ir
         if quadrature != SHELL:
             raise ValueError(f"law {law_name!r} is a shell law: its kernels have quadrature {SHELL!r}, not {quadrature!r}")
         return build_shell_ir(element_name, law_name, max_ops, constants)
     if law.kind == "discrete":                  # an element energy in nodal positions: generator/discrete.py
-        from .discrete import QUADRATURE, build_discrete_ir
-        if quadrature != QUADRATURE:
-            raise ValueError(f"law {law_name!r} is discrete: its kernels have quadrature {QUADRATURE!r}, not {quadrature!r}")
+        if quadrature != DISCRETE:
+            raise ValueError(f"law {law_name!r} is discrete: its kernels have quadrature {DISCRETE!r}, not {quadrature!r}")
         return build_discrete_ir(element_name, law_name, max_ops, constants)
     recompute = constants == "recompute"
     ref = get_element(element_name)

@@ -27,6 +27,7 @@ import sympy as sp
 
 from .. import laws as laws_pkg
 from . import GENERATOR_VERSION
+from .kernel_ir import KernelIR
 from .discrete import _DiscreteBuilder
 from .fragments import DEFAULT_MAX_OPS, Fragment, count_ops, eliminate, split
 from .kernel_body import Assign, Declare, Flag, ref, stress_record
@@ -42,7 +43,6 @@ def _s(name):
 
 def build_shell_ir(element_name: str, law_name: str, max_ops: int = DEFAULT_MAX_OPS, constants="precompute"):
     """The IR of a shell law's kernel on its element type (quadrature "exact")."""
-    from .ir import KernelIR
     if constants != "precompute":
         raise ValueError("shell kernels store their stiffness as constants: only constants='precompute'")
     law = laws_pkg.get(law_name)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stability import (BAR, DIVERGED, INVALID, STABLE, GRAVITY, _Run, _is, _scene_dict, _stable_dt)
+from .stability_runs import BAR, DIVERGED, GRAVITY, INVALID, STABLE, Run, outcome_in, scene_dict, stable_dt
 
 __all__ = ["case_spring_compression", "case_spring_extremes", "BUCKLED", "asymmetry"]
 
@@ -37,7 +37,7 @@ def _spring_material(data, law, A):
 
 def compression_scene(law, A, n, steps, dt):
     L = round(n * CELL, 12)
-    data = _scene_dict(law, "implicit_euler", dt, steps, E=1e4, nu=0.3, size=(L, L, L), cells=(n, n, n),
+    data = scene_dict(law, "implicit_euler", dt, steps, E=1e4, nu=0.3, size=(L, L, L), cells=(n, n, n),
                        gravity=False, fixed="bottom", rayleigh=(0.0, 0.01), quadrature="discrete")
     data["fixed"].append({"box": [[-1.0, -1.0, L - 1e-9 * L], [2 * L, 2 * L, 2 * L]],
                           "displacement": [0.0, 0.0, -0.2 * L]})
@@ -64,7 +64,7 @@ def case_spring_compression(quick):
         from ...runtime.mesh.bars import generate_bar        # deferred: mesh costs ~0.02 s at every CLI start
         points = generate_bar((L, L, L), (n, n, n), "hexahedron").points
         u0 = 1e-4 * CELL * np.random.default_rng(0).standard_normal(points.shape)
-        run = _Run(f"spring compression 20 % {n}^3", name, "implicit_euler", dt, expected, _is(*allowed))
+        run = Run(f"spring compression 20 % {n}^3", name, "implicit_euler", dt, expected, outcome_in(*allowed))
 
         def judge(sim, summary, points=points, L=L):
             a = asymmetry(points, sim.displacement, L)
@@ -75,7 +75,7 @@ def case_spring_compression(quick):
 
 
 def _cantilever(law, kind, dt, steps, E, A=None):
-    data = _scene_dict(law, kind, dt, steps, E=E, cells=(5, 1, 1), quadrature="discrete")   # 0.2 m cubes
+    data = scene_dict(law, kind, dt, steps, E=E, cells=(5, 1, 1), quadrature="discrete")   # 0.2 m cubes
     data["solver"]["backend"] = "c"
     return _spring_material(data, law, A)
 
@@ -91,19 +91,19 @@ def case_spring_extremes(quick):
             for dt in (1.0 / 60, 0.1):
                 bound = GRAVITY * (dt * steps) ** 2 + 10.0 * max(BAR)
                 soft = 1000.0 * GRAVITY * BAR[0] / E > 0.5
-                allowed = _is(STABLE, INVALID, DIVERGED) if soft else _is(STABLE)
+                allowed = outcome_in(STABLE, INVALID, DIVERGED) if soft else outcome_in(STABLE)
                 expected = ("too soft to carry its weight: stable, invalid or diverged (detected)" if soft else
                             f"stable: all finite, max|u| <= {bound:.3g}")
-                run = _Run(f"springs stiffness E={E:.0e}", name, "implicit_euler", dt, expected, allowed)
+                run = Run(f"springs stiffness E={E:.0e}", name, "implicit_euler", dt, expected, allowed)
 
                 def judge(sim, summary, bound=bound, run=run):
                     return (STABLE if run.max_u <= bound else DIVERGED,
                             f"max|u| = {run.max_u:.3g} m (bound {bound:.3g}); tip z = {summary.probes['tip'][2]:.4g} m")
                 rows.append(run.execute(_cantilever(law, "implicit_euler", dt, steps, E, A), judge=judge))
-        crit = _stable_dt(_cantilever(law, "explicit", 1e-3, 1, 1e6, A))
-        for factor, expected, allowed in ((0.5, "stable", _is(STABLE)), (2.0, "diverged (detected)", _is(DIVERGED))):
+        crit = stable_dt(_cantilever(law, "explicit", 1e-3, 1, 1e6, A))
+        for factor, expected, allowed in ((0.5, "stable", outcome_in(STABLE)), (2.0, "diverged (detected)", outcome_in(DIVERGED))):
             dt = factor * crit
-            run = _Run(f"springs explicit {factor:g}x stable dt", name, "explicit", dt, expected, allowed)
+            run = Run(f"springs explicit {factor:g}x stable dt", name, "explicit", dt, expected, allowed)
             run.extra.append(f"estimated stable dt {crit:.4g} s")
             rows.append(run.execute(_cantilever(law, "explicit", dt, 150 if quick else 400, 1e6, A)))
     return rows

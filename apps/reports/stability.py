@@ -28,187 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import laws
-from ...runtime.physics import health
 from ...runtime.base.errors import TensormassError
 from ...runtime.run.output import write_text_atomic
 from ...runtime.scene.scene import Material, Scene
+from .springs_stability import case_spring_compression, case_spring_extremes
+from .stability_runs import (COLUMNS, BAR, DIVERGED, GRAVITY, INVALID, RECOVERED, STABLE, Run, any_detected, clean,
+                             md, min_det_F, num, outcome_in, refused, scene_dict, short, stable_dt)
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
-
-COLUMNS = ("case", "law", "integrator", "dt", "outcome", "expected", "ok", "max_energy", "max_abs_u",
-           "min_det_F", "newton_iterations", "linear_iterations", "wall_time", "message")
-
-STABLE, RECOVERED, DIVERGED = "stable", "recovered", "diverged (detected)"
-INVALID = "invalid (detected)"
-GRAVITY = 9.81
-BAR = (1.0, 0.2, 0.2)
-
-
-# ============================================================================== helpers
-
-
-def _scene_dict(law="stvk", kind="implicit_euler", dt=1.0 / 60, steps=5, E=1e6, nu=0.3, size=BAR,
-                cells=(4, 1, 1), element="hexahedron", gravity=True, fixed="left", rayleigh=(0.0, 0.0),
-                quadrature="gauss2", density=1000.0, newton_max_iterations=25):
-    """A validated-scene dict: a bar clamped at x = 0 (fixed="left"), at z = 0 ("bottom"), or free."""
-    big = 10.0 * max(size)
-    data = {
-        "name": "stability",
-        "mesh": {"generate": "bar", "size": list(size), "cells": list(cells), "element": element},
-        "material": [{"law": law, "quadrature": quadrature, "E": float(E), "nu": float(nu),
-                      "density": float(density)}],
-        "loads": {"gravity": [0.0, 0.0, -GRAVITY if gravity else 0.0]},
-        "solver": {"kind": kind, "dt": float(dt), "steps": int(steps), "rayleigh": list(rayleigh),
-                   "newton_max_iterations": int(newton_max_iterations)},
-        "probe": [{"name": "tip", "point": [float(size[0]), size[1] / 2, size[2] / 2]}],
-    }
-    eps = 1e-9 * max(size)
-    if fixed == "left":
-        data["fixed"] = [{"box": [[-big, -big, -big], [eps, big, big]]}]
-    elif fixed == "bottom":
-        data["fixed"] = [{"box": [[-big, -big, -big], [big, big, eps]]}]
-    return data
-
-
-def min_det_F(model, u) -> float:
-    """Smallest det F over every integration point of every element: the health monitor's measure."""
-    return health.min_det_F(model, np.asarray(u, dtype=float))[0]
-
-
-def _short(exc_or_text, limit=110) -> str:
-    text = str(exc_or_text).strip().splitlines()[0] if str(exc_or_text).strip() else type(exc_or_text).__name__
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def _clean(text) -> str:
-    """Messages go into CSV/markdown cells: one line, no literal NaN token."""
-    text = " ".join(str(text).split())
-    return re.sub(r"\bnan\b", "non-finite", text, flags=re.IGNORECASE)
-
-
-def _md(text) -> str:
-    """A markdown table cell: _clean, with pipes escaped."""
-    return _clean(text).replace("|", "\\|")
-
-
-def _num(x):
-    """A finite float or "" (never NaN/inf in the output)."""
-    if x is None or isinstance(x, bool):
-        return ""
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return ""
-    return x if math.isfinite(x) else ""
-
-
-class _Run:
-    """One simulation case: builds, runs, tracks max |u|, min det F, energies; classifies the outcome."""
-
-    def __init__(self, case, law, integrator, dt, expected, allowed):
-        self.row = {c: "" for c in COLUMNS}
-        self.row.update(case=case, law=law, integrator=integrator, dt=_num(dt), expected=expected)
-        self.allowed = allowed            # callable(outcome) -> bool
-        self.sim = None
-        self.max_u = 0.0
-        self.min_det = math.inf
-        self.extra = []                   # extra message parts
-        self.start = time.perf_counter()
-
-    def _track(self, k=None, n=None):
-        u = self.sim.ctx.u
-        if np.all(np.isfinite(u)):
-            self.max_u = max(self.max_u, float(np.abs(u).max()) if u.size else 0.0)
-
-    def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
-        """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
-        from ...runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
-        try:
-            scene = Scene.from_dict(scene_data)
-            self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0, output=False)
-            if u0 is not None:
-                self.min_det = min_det_F(sim.model, sim._u0)
-                self.max_u = float(np.abs(u0).max())
-                if refuse_inverted_start:
-                    self._refuse_inverted(sim, sim._u0)
-        except TensormassError as exc:
-            return self._finish(f"refused ({_short(exc)})", str(exc))
-        try:
-            summary = sim.run()
-        except TensormassError as exc:
-            if sim.ctx is not None:
-                self.row["newton_iterations"] = sim.ctx.newton_iterations
-                self.row["linear_iterations"] = sim.ctx.linear_iterations
-            stopped = getattr(exc, "summary", None)
-            if stopped is not None:
-                self._health(stopped)
-            outcome = INVALID if getattr(exc, "status", None) == "invalid" else DIVERGED
-            return self._finish(outcome, f"{type(exc).__name__}: {exc}")
-        self._health(summary)
-        self.row["newton_iterations"] = summary.iterations["newton"]
-        self.row["linear_iterations"] = summary.iterations["linear"]
-        energies = [e for e in summary.per_step.get("elastic", []) if e is not None]
-        u = sim.ctx.u
-        if not (np.all(np.isfinite(u)) and all(math.isfinite(e) for e in energies)):
-            # the runtime should never get here; the report says so instead of writing NaN
-            return self._finish(DIVERGED, "non-finite state NOT caught by the runtime (found by the report)",
-                                force_fail=True)
-        if energies:
-            self.row["max_energy"] = _num(max(energies))
-        warned = f"monitor warnings: {summary.warnings[0]['message']}" if summary.warnings else ""
-        if warned:
-            self.extra.append(warned)
-        if judge is None:
-            return self._finish(STABLE if not warned else RECOVERED, "finished; the health monitor trusts it")
-        outcome, message = judge(sim, summary)
-        if outcome == STABLE and warned:       # "stable" is only what the monitor found clean throughout
-            outcome = RECOVERED
-        return self._finish(outcome, message)
-
-    def _health(self, summary):
-        """min det F as the health monitor saw it (every step, every law), not recomputed here."""
-        low = (summary.health or {}).get("min_det_F")
-        if low is not None:
-            self.min_det = min(self.min_det, low)
-
-    def _refuse_inverted(self, sim, u):
-        for p in sim.model.parts:
-            if laws.get(p.law).requires_positive_J:
-                bad = p.kernel.inverted(p.D_active, sim.model.element_displacements(p, u))
-                if bad.any():
-                    ids = ", ".join(str(int(i)) for i in p.cell_ids[bad][:8])
-                    more = f" and {int(bad.sum()) - 8} more" if bad.sum() > 8 else ""
-                    raise TensormassError(f"inverted elements in the initial state (det F <= 0, law {p.law!r} "
-                                          f"is undefined there): element(s) {ids}{more}")
-
-    def _finish(self, outcome, message, force_fail=False):
-        r = self.row
-        r["outcome"] = outcome
-        r["max_abs_u"] = _num(self.max_u)
-        r["min_det_F"] = _num(self.min_det)
-        r["wall_time"] = round(time.perf_counter() - self.start, 4)
-        parts = [message] + self.extra
-        if self.min_det <= 0:
-            parts.append(f"some element inverted (min det F = {self.min_det:.3g}, initial state included)")
-        r["message"] = _clean("; ".join(p for p in parts if p))
-        r["ok"] = bool(self.allowed(outcome)) and not force_fail
-        return r
-
-
-def _any_detected(outcome) -> bool:
-    return outcome in (STABLE, RECOVERED, DIVERGED, INVALID) or outcome.startswith("refused (")
-
-
-def _is(*names):
-    return lambda outcome: outcome in names
-
-
-def _refused(outcome) -> bool:
-    return outcome.startswith("refused (")
-
-
-# ============================================================================== cases
 
 
 def case_stiffness(quick):
@@ -224,17 +51,17 @@ def case_stiffness(quick):
             soft = 1000.0 * GRAVITY * BAR[0] / E > 0.5
             if soft:
                 expected, allowed = ("too soft to carry its weight: invalid or diverged (detected), or stable "
-                                     "without any inverted element", _is(STABLE, INVALID, DIVERGED))
+                                     "without any inverted element", outcome_in(STABLE, INVALID, DIVERGED))
             else:
                 expected, allowed = (f"stable: all finite, max|u| <= {bound:.3g} (free fall over the run + "
-                                     "10 x size)", _is(STABLE))
-            run = _Run(f"stiffness E={E:.0e}", "stvk", "implicit_euler", dt, expected, allowed)
+                                     "10 x size)", outcome_in(STABLE))
+            run = Run(f"stiffness E={E:.0e}", "stvk", "implicit_euler", dt, expected, allowed)
 
             def judge(sim, summary, bound=bound, run=run):
                 ok = run.max_u <= bound
                 return (STABLE if ok else DIVERGED,
                         f"max|u| = {run.max_u:.3g} m (bound {bound:.3g}); tip z = {summary.probes['tip'][2]:.4g} m")
-            rows.append(run.execute(_scene_dict("stvk", "implicit_euler", dt, steps, E=E), judge=judge))
+            rows.append(run.execute(scene_dict("stvk", "implicit_euler", dt, steps, E=E), judge=judge))
     return rows
 
 
@@ -244,42 +71,35 @@ def case_poisson(quick):
     rows = []
     for nu in nus:
         if nu >= 0.5:
-            run = _Run(f"poisson nu={nu}", "hooke", "static", None, "refused (scene validation: nu >= 0.5)",
-                       _refused)
+            run = Run(f"poisson nu={nu}", "hooke", "static", None, "refused (scene validation: nu >= 0.5)",
+                       refused)
         else:
-            run = _Run(f"poisson nu={nu}", "hooke", "static", None, "stable (tip deflection reported: locking)",
-                       _is(STABLE))
+            run = Run(f"poisson nu={nu}", "hooke", "static", None, "stable (tip deflection reported: locking)",
+                       outcome_in(STABLE))
 
         def judge(sim, summary):
             tip = summary.probes["tip"]
             return STABLE, f"tip deflection z = {tip[2]:.5g} m (smaller as nu -> 0.5: volumetric locking)"
-        rows.append(run.execute(_scene_dict("hooke", "static", 1.0, 1, E=1e6, nu=nu,
+        rows.append(run.execute(scene_dict("hooke", "static", 1.0, 1, E=1e6, nu=nu,
                                             cells=(4, 1, 1) if quick else (6, 2, 2)), judge=judge))
     return rows
-
-
-def _stable_dt(scene_data) -> float:
-    # deferred: model and integrators cost ~0.2 s at every CLI start
-    from ...runtime.physics.integrators import Context, stable_time_step
-    from ...runtime.model.model import Model
-    return float(stable_time_step(Context(Model.from_scene(Scene.from_dict(scene_data)))))
 
 
 def case_explicit(quick):
     """3. symplectic Euler at 0.5x, 1x, 2x the estimated stable step."""
     law = "hooke"
-    base = _scene_dict(law, "explicit", 1e-3, 1, E=1e6)
-    crit = _stable_dt(base)
+    base = scene_dict(law, "explicit", 1e-3, 1, E=1e6)
+    crit = stable_dt(base)
     steps = 150 if quick else 400
     rows = []
-    for factor, expected, allowed in ((0.5, "stable", _is(STABLE)),
+    for factor, expected, allowed in ((0.5, "stable", outcome_in(STABLE)),
                                       (1.0, "stable or diverged (detected): at the limit, just reported",
-                                       _is(STABLE, DIVERGED)),
-                                      (2.0, "diverged (detected)", _is(DIVERGED))):
+                                       outcome_in(STABLE, DIVERGED)),
+                                      (2.0, "diverged (detected)", outcome_in(DIVERGED))):
         dt = factor * crit
-        run = _Run(f"explicit {factor:g}x stable dt", law, "explicit", dt, expected, allowed)
+        run = Run(f"explicit {factor:g}x stable dt", law, "explicit", dt, expected, allowed)
         run.extra.append(f"estimated stable dt {crit:.4g} s, {steps} steps")
-        data = _scene_dict(law, "explicit", dt, steps, E=1e6)
+        data = scene_dict(law, "explicit", dt, steps, E=1e6)
         rows.append(run.execute(data))
     return rows
 
@@ -314,13 +134,13 @@ def case_squash(quick):
     rows = []
     for law in laws_:
         if law == "stable_neohookean":
-            expected, allowed = "recovered (max|u| < 5 % of initial)", _is(RECOVERED)
+            expected, allowed = "recovered (max|u| < 5 % of initial)", outcome_in(RECOVERED)
         elif law == "stvk":
-            expected, allowed = "anything, but detected (no silent non-finite values)", _any_detected
+            expected, allowed = "anything, but detected (no silent non-finite values)", any_detected
         else:
-            expected, allowed = "stable/recovered, or refused/diverged (detected) if it inverts", _any_detected
-        run = _Run("squash 10% and release", law, "backward_euler", dt, expected, allowed)
-        data = _scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
+            expected, allowed = "stable/recovered, or refused/diverged (detected) if it inverts", any_detected
+        run = Run("squash 10% and release", law, "backward_euler", dt, expected, allowed)
+        data = scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
                            gravity=False, fixed="bottom", rayleigh=(2.0, 0.0))
         initial = float(np.abs(u0).max())
         rows.append(run.execute(data, u0=u0, refuse_inverted_start=True, judge=_recovery_judge(run, initial)))
@@ -341,21 +161,21 @@ def case_scramble(quick):
     rows = []
     for law in laws_:
         if law == "stable_neohookean":
-            expected, allowed = "recovered (max|u| < 5 % of initial)", _is(RECOVERED)
+            expected, allowed = "recovered (max|u| < 5 % of initial)", outcome_in(RECOVERED)
         elif law in ("neohookean", "mooney_rivlin"):
-            expected, allowed = "refused (inverted elements ...) or detected", _any_detected
+            expected, allowed = "refused (inverted elements ...) or detected", any_detected
         else:
-            expected, allowed = "anything, but detected (no silent non-finite values)", _any_detected
-        run = _Run("scramble and release", law, "backward_euler", dt, expected, allowed)
-        data = _scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
+            expected, allowed = "anything, but detected (no silent non-finite values)", any_detected
+        run = Run("scramble and release", law, "backward_euler", dt, expected, allowed)
+        data = scene_dict(law, "backward_euler", dt, steps, E=1e5, nu=0.3, size=CUBE, cells=cells,
                            gravity=False, fixed="bottom", rayleigh=(2.0, 0.0))
         initial = float(np.abs(u0).max())
         rows.append(run.execute(data, u0=u0, refuse_inverted_start=True, judge=_recovery_judge(run, initial)))
         if law == "neohookean":
             # the same without the report's up-front check: what the runtime itself does
-            run = _Run("scramble and release (runtime alone)", law, "backward_euler", dt,
+            run = Run("scramble and release (runtime alone)", law, "backward_euler", dt,
                        "diverged (detected) or refused: the runtime stops with a clear message",
-                       lambda o: o == DIVERGED or _refused(o))
+                       lambda o: o == DIVERGED or refused(o))
             rows.append(run.execute(data, u0=u0, judge=_recovery_judge(run, initial)))
     return rows
 
@@ -382,11 +202,11 @@ def case_inverted_rest(quick):
         except TensormassError as exc:
             messages.append(f"{'mesh check' if check else 'kernel constants'}: {exc}")
             if outcome == STABLE:
-                outcome = f"refused ({_short(exc)})"
+                outcome = f"refused ({short(exc)})"
     named = outcome.startswith("refused (") and all(
         re.search(rf"\b{element}\b", m) for m in messages)
     row.update(outcome=outcome, ok=bool(named), wall_time=round(time.perf_counter() - start, 4),
-               message=_clean("; ".join(messages)))
+               message=clean("; ".join(messages)))
     return [row]
 
 
@@ -394,9 +214,9 @@ def case_sliver(quick):
     """7. very thin elements: stable or refused with a clear message."""
     rows = []
     for law in ("stvk",) if quick else ("stvk", "stable_neohookean"):
-        run = _Run("sliver elements 1 x 1 x 1e-4", law, "implicit_euler", 0.01,
-                   "stable or refused (clear message)", lambda o: o == STABLE or _refused(o))
-        data = _scene_dict(law, "implicit_euler", 0.01, 5, E=1e6, size=(1.0, 1.0, 1e-4), cells=(2, 2, 1))
+        run = Run("sliver elements 1 x 1 x 1e-4", law, "implicit_euler", 0.01,
+                   "stable or refused (clear message)", lambda o: o == STABLE or refused(o))
+        data = scene_dict(law, "implicit_euler", 0.01, 5, E=1e6, size=(1.0, 1.0, 1e-4), cells=(2, 2, 1))
         rows.append(run.execute(data))
     return rows
 
@@ -417,7 +237,7 @@ def case_rotation(quick):
                    expected=expected)
         start = time.perf_counter()
         try:
-            data = _scene_dict(law, "backward_euler", 1.0, 1, E=1e6, fixed=None)   # static needs a fixed box
+            data = scene_dict(law, "backward_euler", 1.0, 1, E=1e6, fixed=None)   # static needs a fixed box
             model = Model.from_scene(Scene.from_dict(data))
             asm = Assembler(model)
             X = model.mesh.points
@@ -431,11 +251,11 @@ def case_rotation(quick):
             ratio = ghost / weight
             ok = ratio > 1e-3 if law == "hooke" else ratio < 1e-8
             row.update(outcome=STABLE if np.isfinite(ratio) else DIVERGED, ok=bool(ok and np.isfinite(ratio)),
-                       max_energy=_num(W), max_abs_u=_num(np.abs(u).max()), min_det_F=_num(min_det_F(model, u)),
-                       message=_clean(f"ghost force |f| = {ghost:.3g} N, weight {weight:.3g} N, ratio {ratio:.3g}; "
+                       max_energy=num(W), max_abs_u=num(np.abs(u).max()), min_det_F=num(min_det_F(model, u)),
+                       message=clean(f"ghost force |f| = {ghost:.3g} N, weight {weight:.3g} N, ratio {ratio:.3g}; "
                                       f"elastic energy {W:.3g} J"))
         except TensormassError as exc:
-            row.update(outcome=f"refused ({_short(exc)})", ok=False, message=_clean(exc))
+            row.update(outcome=f"refused ({short(exc)})", ok=False, message=clean(exc))
         row["wall_time"] = round(time.perf_counter() - start, 4)
         rows.append(row)
     return rows
@@ -447,22 +267,20 @@ def case_large_dt(quick):
     for dt in (1.0, 10.0):
         steps = 3
         bound = 10.0 * max(BAR)
-        run = _Run("large dt stiff beam E=1e9", "stvk", "implicit_euler", dt,
-                   f"stable: bounded (max|u| <= {bound:.3g})", _is(STABLE))
+        run = Run("large dt stiff beam E=1e9", "stvk", "implicit_euler", dt,
+                   f"stable: bounded (max|u| <= {bound:.3g})", outcome_in(STABLE))
 
         def judge(sim, summary, run=run, bound=bound):
             tip = summary.probes["tip"][2]
             return (STABLE if run.max_u <= bound else DIVERGED,
                     f"max|u| = {run.max_u:.3g} m, tip z = {tip:.4g} m (static sag of a clamped beam)")
-        rows.append(run.execute(_scene_dict("stvk", "implicit_euler", dt, steps, E=1e9), judge=judge))
+        rows.append(run.execute(scene_dict("stvk", "implicit_euler", dt, steps, E=1e9), judge=judge))
     return rows
 
 
 CASES = (case_stiffness, case_poisson, case_explicit, case_squash, case_scramble, case_inverted_rest,
          case_sliver, case_rotation, case_large_dt)
 
-# the spring models' cases (thesis chapters 3 and 7) live in their own file; it uses the helpers above
-from .springs_stability import case_spring_compression, case_spring_extremes  # noqa: E402
 
 CASES = CASES + (case_spring_compression, case_spring_extremes)
 
@@ -475,7 +293,7 @@ def _fmt(value) -> str:
         return str(value)
     if isinstance(value, float):
         return "" if not math.isfinite(value) else f"{value:.6g}"
-    return _clean(value)
+    return clean(value)
 
 
 def _csv_text(rows) -> str:
@@ -501,13 +319,13 @@ def _report_text(rows, quick, total) -> str:
         cells = [r["case"], r["law"], r["integrator"], _fmt(r["dt"]), r["outcome"], "yes" if r["ok"] else "NO",
                  _fmt(r["max_energy"]), _fmt(r["max_abs_u"]), _fmt(r["min_det_F"]),
                  _fmt(r["newton_iterations"]), _fmt(r["linear_iterations"]), _fmt(r["wall_time"])]
-        lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
+        lines.append("| " + " | ".join(md(c) for c in cells) + " |")
     lines += ["", "## Expectations", ""]
     for r in rows:
         met = "met" if r["ok"] else "NOT met"
         dt = f", dt {_fmt(r['dt'])}" if r["dt"] != "" else ""
-        lines.append(f"- **{_clean(r['case'])}** ({r['law']}, {r['integrator']}{dt}): expects {_clean(r['expected'])}; "
-                     f"got `{_clean(r['outcome'])}`: {met}. {_clean(r['message'])}")
+        lines.append(f"- **{clean(r['case'])}** ({r['law']}, {r['integrator']}{dt}): expects {clean(r['expected'])}; "
+                     f"got `{clean(r['outcome'])}`: {met}. {clean(r['message'])}")
     return "\n".join(lines) + "\n"
 
 
@@ -519,8 +337,8 @@ def _run_case(index, quick) -> tuple:
         got = case(quick)
     except Exception as exc:      # a bug in a case must not lose the others' results
         row = {c: "" for c in COLUMNS}
-        row.update(case=case.__name__, outcome=f"refused (report error: {_short(exc)})",
-                   expected="the case runs", ok=False, message=_clean(f"{type(exc).__name__}: {exc}"))
+        row.update(case=case.__name__, outcome=f"refused (report error: {short(exc)})",
+                   expected="the case runs", ok=False, message=clean(f"{type(exc).__name__}: {exc}"))
         got = [row]
     return got, time.perf_counter() - t0
 
@@ -540,7 +358,7 @@ def run_stability(out_dir, quick=False, progress=print, workers: int = 1, schedu
         got, seconds = outcome[1]
         if progress is not None:
             summary = ", ".join(f"{r['law']}: {r['outcome']}{'' if r['ok'] else ' (NOT ok)'}" for r in got)
-            progress(f"{CASES[i].__name__[5:]:>14s} {seconds:6.1f} s  {_short(summary, 200)}")
+            progress(f"{CASES[i].__name__[5:]:>14s} {seconds:6.1f} s  {short(summary, 200)}")
     outcomes = map_tasks(_run_case, [(i, quick) for i in range(len(CASES))], workers=workers, scheduler=scheduler,
                          label="case", capture=False, progress=workers > 1 or scheduler is not None, on_result=show)
     for _, (got, _) in outcomes:

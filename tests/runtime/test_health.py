@@ -162,7 +162,7 @@ def test_on_inversion_stop_stops_at_the_first_inverted_step():
 
 def test_recovered_inversion_is_a_warning_not_a_failure():
     # a scrambled stable neo-Hookean cube inverts, then recovers: warnings, exit code 0
-    from tensormass.apps.reports.stability import _scene_dict
+    from tensormass.apps.reports.stability_runs import scene_dict as _scene_dict
     scene = tm.Scene.from_dict(_scene_dict("stable_neohookean", "backward_euler", 0.05, 40, E=1e5, size=(1, 1, 1),
                                            cells=(2, 2, 2), gravity=False, fixed="bottom", rayleigh=(2.0, 0.0)))
     X = Model.from_scene(scene).mesh.points

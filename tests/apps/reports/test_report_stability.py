@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from tensormass.apps.reports import stability
+from tensormass.apps.reports import stability, stability_runs
 from tensormass.apps.reports.stability import COLUMNS, add_stability_command, min_det_F, run_stability
 
 
@@ -102,7 +102,7 @@ def test_report_md(quick):
 def test_min_det_F_matches_kernel():
     from tensormass.runtime.model.model import Model
     from tensormass.runtime.scene.scene import Scene
-    model = Model.from_scene(Scene.from_dict(stability._scene_dict("stvk", "backward_euler", 0.1, 1, fixed=None)))
+    model = Model.from_scene(Scene.from_dict(stability_runs.scene_dict("stvk", "backward_euler", 0.1, 1, fixed=None)))
     u = np.zeros(model.n_dofs)
     assert min_det_F(model, u) == pytest.approx(1.0)
     X = model.mesh.points
