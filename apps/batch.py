@@ -57,7 +57,7 @@ from pathlib import Path
 
 from ..runtime.base.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, RunInterrupted,
     RunStopped, SceneError, TensormassError)
-from ..runtime.run.output import check_writable, write_bytes_atomic, write_text_atomic
+from ..runtime.base.files import check_writable, write_bytes_atomic, write_text_atomic
 
 __all__ = ["parse_vary", "split_values", "apply_override", "plan_tasks", "run_task", "map_tasks",
            "run_batch", "write_table", "add_batch_command", "THREAD_ENV", "TIMING_COLUMNS", "DASK_MISSING",

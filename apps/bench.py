@@ -34,7 +34,7 @@ from ..generator.catalogue import entries as catalogue
 from ..backends.c.loader import build, cflags, compiler
 from ..runtime.base.errors import TensormassError
 from ..runtime.kernels.kernels import BACKENDS, kernel_source, load_kernel, load_recompute_kernel
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from ..runtime.base.samples import random_elements
 from .bench_assembly import add_assembly_command
 from .bench_history import add_history_command

@@ -31,7 +31,7 @@ from ..runtime.base.errors import TensormassError
 from ..runtime.kernels.fused import block_positions
 from ..runtime.kernels.kernels import load_kernel
 from ..runtime.mesh.bars import generate_bar
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
 
 LAW = "neohookean"

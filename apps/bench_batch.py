@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 
 TIMING = ("time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb")
 

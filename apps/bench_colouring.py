@@ -28,7 +28,7 @@ import numpy as np
 
 from ..runtime.assembly import colouring as col
 from ..runtime.base import parallel
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 
 __all__ = ["main", "run_colouring_bench", "tet_mesh", "icosphere", "plate"]
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_cutting_bench", "add_cutting_command", "TARGET_MS"]

@@ -15,7 +15,7 @@ import re
 import time
 
 from ..runtime.base import parallel
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .bench_organ import Case, organ_mesh, probe_point, scene_text
 from .machine import machine_info
 

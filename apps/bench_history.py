@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ..runtime.base import parallel
 from ..runtime.run import simulation
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from ..runtime.scene.scene import Scene
 from .machine import machine_info
 

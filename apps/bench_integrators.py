@@ -26,7 +26,7 @@ import numpy as np
 from ..runtime.assembly.assembly import assemble
 from ..runtime.physics.integrators import Context, stable_time_step
 from ..runtime.model.model import Model
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from ..runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Output, Probe, Scene, Solver
 from ..runtime.run.simulation import Simulation
 from .machine import machine_info

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from ..runtime.base.errors import TensormassError
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .machine import format_machine, machine_info
 
 MAKE_ORGAN = Path(__file__).resolve().with_name("organ_mesh.py")      # the mesh maker (its hash names the meshes)

@@ -24,7 +24,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..runtime.assembly import assembly
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from ..runtime.assembly.pattern import SparsePattern, _ReferencePattern
 
 __all__ = ["main", "run_pattern_bench", "scene_dict"]

@@ -16,7 +16,7 @@ import time
 
 from ..runtime.base import parallel
 from ..runtime.base.errors import TensormassError
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_shells_bench", "add_shells_command", "THESIS_S_PER_FRAME"]

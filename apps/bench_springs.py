@@ -22,7 +22,7 @@ import time
 
 from ..runtime.base import parallel
 from ..runtime.base.errors import TensormassError
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
 
 __all__ = ["run_springs_bench", "add_springs_command", "MODELS"]

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ..backends import BACKENDS
-from ..runtime.run.output import write_json_atomic
+from ..runtime.base.files import write_json_atomic
 from ..runtime.scene.scene import Scene
 from .machine import machine_info
 

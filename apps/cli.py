@@ -40,7 +40,7 @@ from ..generator.elements import ELEMENTS, element
 from ..generator.pipeline import generate_all
 from ..generator import shape_tables, volumetric
 from ..runtime.base.errors import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped, TensormassError
-from ..runtime.run.output import check_writable
+from ..runtime.base.files import check_writable
 from .batch import add_batch_command
 from .bench import add_bench_command
 from .commands import add_commands

@@ -7,12 +7,11 @@ holds no timestamps, so regenerating the same inputs gives identical bytes.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from pathlib import Path
 
 from . import GENERATOR_VERSION
+from ..runtime.base.files import write_atomic
 from ..backends import BACKENDS, get as get_backend
 from .catalogue import Entry
 from .ir import build_ir
@@ -22,22 +21,6 @@ MANIFEST = "manifest.json"
 
 def backend_dir(out: Path, backend: str) -> Path:
     return Path(out) / backend
-
-
-def write_atomic(path: Path, data) -> None:
-    """Write text or bytes to a temporary file next to path, then rename it over path:
-    readers never see a half-written file, an interrupted run leaves the old one (or none)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data.encode("utf-8") if isinstance(data, str) else data)
-        os.chmod(tmp, 0o644)          # mkstemp creates 0600; these are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def generate_entry(entry: Entry, backends, out: Path, constants: str = "precompute") -> dict:

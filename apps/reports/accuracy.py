@@ -74,7 +74,7 @@ import tomllib
 from pathlib import Path
 
 from ...runtime.base.errors import TensormassError
-from ...runtime.run.output import write_bytes_atomic
+from ...runtime.base.files import write_bytes_atomic
 from ...runtime.scene.scene import Scene, SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC

@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...runtime.run.output import write_json_atomic, write_text_atomic
+from ...runtime.base.files import write_json_atomic, write_text_atomic
 
 __all__ = ["run_squeeze", "add_squeeze_command", "COLUMNS", "MODELS", "THESIS", "squeeze_scene"]
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ...runtime.base.errors import TensormassError
-from ...runtime.run.output import write_text_atomic
+from ...runtime.base.files import write_text_atomic
 from ...runtime.scene.scene import Material, Scene
 from .springs_stability import case_spring_compression, case_spring_extremes
 from .stability_runs import (COLUMNS, BAR, DIVERGED, GRAVITY, INVALID, RECOVERED, STABLE, Run, any_detected, clean,

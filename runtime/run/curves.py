@@ -25,7 +25,8 @@ import io
 import numpy as np
 
 from ..base.errors import TensormassError
-from .output import OutputError, check_png_path, write_bytes_atomic
+from .output import OutputError, check_png_path
+from ..base.files import write_bytes_atomic
 
 __all__ = ["plot_history", "render_history", "history_panels", "history_groups", "GROUPS"]
 

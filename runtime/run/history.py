@@ -31,7 +31,7 @@ from __future__ import annotations
 import csv
 import io
 
-from .output import write_text_atomic
+from ..base.files import write_text_atomic
 
 __all__ = ["History", "SCALAR_KEYS", "units", "write_history_csv", "csv_columns"]
 

@@ -59,25 +59,22 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import itertools
-import json
 import os
 import re
 import signal
 import stat
-import tempfile
 import threading
-import weakref
 from pathlib import Path
 from xml.sax.saxutils import quoteattr, unescape
 
 import numpy as np
 
-from ...generator.pipeline import write_atomic
 from ..base.errors import TensormassError
+from .lock import LOCK_NAME, FolderLock
+from ..base.files import check_writable, os_reason as _reason, remove_quietly, write_bytes_atomic, write_json_atomic
 
-__all__ = ["Writer", "OutputError", "FolderLock", "LOCK_NAME", "write_bytes_atomic", "write_json_atomic", "write_text_atomic",
-           "write_summary", "check_summary_path", "is_summary_file", "check_writable", "check_png_path", "xml_comment",
+__all__ = ["Writer", "OutputError", "FolderLock", "LOCK_NAME",
+           "write_summary", "check_summary_path", "is_summary_file", "check_png_path", "xml_comment",
            "PVD_MARKER", "SUMMARY_FORMAT"]
 
 PVD_MARKER = "<!-- tensormass frames -->"
@@ -92,42 +89,10 @@ _PVD_HEAD = ('<?xml version="1.0"?>\n' + PVD_MARKER + "\n"
 _PVD_TAIL = b"  </Collection>\n</VTKFile>\n"
 _DATASET_FILE_RE = re.compile(rb'<DataSet\b[^>]*\bfile="([^"<>]*)"')
 _MAX_COMMENT = 400
-LOCK_NAME = ".tensormass.lock"
 
 
 class OutputError(TensormassError):
     """An output file could not be written (disk full, permissions); the message names the file."""
-
-
-def write_bytes_atomic(path, data: bytes) -> None:
-    """Bytes written atomically (temporary file + rename; see generator.pipeline.write_atomic)."""
-    write_atomic(Path(path), data)
-
-
-def write_text_atomic(path, text: str) -> None:
-    """UTF-8 text, written atomically."""
-    write_atomic(Path(path), text)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, float) and not np.isfinite(value):
-        return None      # JSON has no NaN / Inf
-    return value
-
-
-def write_json_atomic(path, data) -> None:
-    """JSON (numpy values converted, NaN/Inf as null), written atomically."""
-    write_text_atomic(path, json.dumps(_jsonable(data), indent=2, allow_nan=False) + "\n")
 
 
 def _remove(path) -> None:
@@ -144,35 +109,7 @@ def _check_finite(name: str, values: np.ndarray) -> None:
         raise TensormassError(f"refusing to write {name} with NaN or Inf values{where}")
 
 
-def _reason(exc: OSError) -> str:
-    """'No space left on device' and the like (the OS's words; the errno name when it has none)."""
-    return exc.strerror or errno.errorcode.get(exc.errno or 0, "") or str(exc)
-
-
 # ============================================================================== checks before a run
-
-
-def _existing_ancestor(path: Path) -> Path:
-    """path itself or its closest existing parent (what a later mkdir -p would write into)."""
-    path = Path(os.path.abspath(path))
-    while not os.path.lexists(path) and path.parent != path:
-        path = path.parent
-    return path
-
-
-def check_writable(folder, what: str) -> None:
-    """Create and remove a temporary file in folder (or its closest existing parent when it
-    does not exist yet): permissions, read-only mounts and quotas show up now, before a run,
-    instead of after its last step. Raises TensormassError naming what and where."""
-    where = _existing_ancestor(Path(folder))
-    if not where.is_dir():
-        raise TensormassError(f"{what} {folder}: {where} is not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(dir=where, prefix=".tensormass-probe-", suffix=".tmp")
-        os.close(fd)
-        os.remove(probe)
-    except OSError as exc:
-        raise TensormassError(f"{what} {folder}: cannot write in {where} ({_reason(exc)})") from None
 
 
 def is_summary_file(path) -> bool:
@@ -281,185 +218,6 @@ def _xml_char(c: str) -> bool:
 
 
 # ============================================================================== one run per folder
-
-# Locks held by this process: lock path -> (token, weak reference to the holder). A lock file
-# with this process's pid is live only while its holder is.
-_HELD: dict = {}
-_TOKENS = itertools.count()
-
-
-def _process_start(pid: int):
-    """The kernel's start time of process pid (clock ticks since boot; Linux), None where unknown:
-    a pid reused by a new process after the holder died has another start."""
-    try:
-        with open(f"/proc/{int(pid)}/stat", "rb") as handle:
-            fields = handle.read().rsplit(b")", 1)[1].split()
-        return int(fields[19])
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def _host() -> str:
-    import socket
-    return socket.gethostname() or "?"
-
-
-class FolderLock:
-    """<folder>/.tensormass.lock: one run writes into a folder at a time (see the module docstring).
-
-        lock = FolderLock(folder, owner)
-        lock.check()        # TensormassError when a live run holds it (reads only)
-        lock.acquire()      # the folder exists; TensormassError when a live run holds it
-        lock.release()      # idempotent; removes the file only while it is still ours
-    """
-
-    def __init__(self, folder, owner=None):
-        self.folder = Path(folder)
-        self.path = self.folder / LOCK_NAME
-        # weak: the Writer holds its lock, and a dropped Writer must be freed (and release it) at once
-        self._owner = weakref.ref(owner) if owner is not None else (lambda: self)
-        self.held = False
-        self._finalizer = None
-
-    @property
-    def owner(self):
-        return self._owner()
-
-    @staticmethod
-    def record(pid: int | None = None) -> str:
-        """The text of a lock held by process pid (default: this one)."""
-        pid = os.getpid() if pid is None else int(pid)
-        start = _process_start(pid)
-        return f"pid={pid} host={_host()} start={'?' if start is None else start}\n"
-
-    def _holder(self):
-        """None: no lock file; else a dict of its fields (pid, host, start; empty when unreadable)."""
-        try:
-            with open(self.path, "rb") as handle:
-                text = handle.read(256).decode("utf-8", "replace")
-        except FileNotFoundError:
-            return None
-        except OSError as exc:
-            raise TensormassError(f"output folder {self.folder}: cannot read its lock {self.path}: "
-                                  f"{_reason(exc)}") from None
-        fields = dict(part.split("=", 1) for part in text.split() if "=" in part)
-        return fields
-
-    def _alive(self, holder: dict) -> bool:
-        """Whether the lock's process may still be running (unknown: yes, the safe answer)."""
-        try:
-            pid = int(holder.get("pid", ""))
-        except ValueError:
-            return True                           # being written right now, or not ours to judge
-        if holder.get("host") != _host():
-            return True                           # another machine's process: cannot be checked
-        if pid == os.getpid():
-            entry = _HELD.get(str(self.path.resolve()))
-            owner = entry[1]() if entry is not None else None
-            return owner is not None and owner is not self.owner
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:
-            pass                                  # alive, another user's
-        except OSError:
-            return True
-        start = holder.get("start", "?")
-        now = _process_start(pid)
-        return not (start.isdigit() and now is not None and int(start) != now)
-
-    def _refuse(self, holder: dict):
-        pid = holder.get("pid") or "unknown"
-        host = holder.get("host")
-        where = f" on {host}" if host and host != _host() else ""
-        same = " (this process)" if pid == str(os.getpid()) else ""
-        return TensormassError(f"output folder {self.folder}: another tensormass run (pid {pid}{where}{same}) is "
-                               f"writing there; wait for it to end or choose another output folder (if no run is "
-                               f"using it, remove {self.path})")
-
-    def check(self) -> None:
-        """Refuse when a live run holds the folder; reads only."""
-        holder = self._holder()
-        if holder is not None and not self.held and self._alive(holder):
-            raise self._refuse(holder)
-
-    def acquire(self) -> None:
-        """Take the lock (the folder must exist); a stale lock is taken over."""
-        if self.held:
-            return
-        text = self.record().encode()
-        for _ in range(4):
-            try:
-                fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-            except FileExistsError:
-                holder = self._holder()
-                if holder is None:
-                    continue                      # released meanwhile: try again
-                if self._alive(holder):
-                    raise self._refuse(holder) from None
-                self._take_over(holder)
-                continue
-            except OSError as exc:
-                raise TensormassError(f"output folder {self.folder}: cannot create its lock {self.path}: "
-                                      f"{_reason(exc)}") from None
-            try:
-                written = os.write(fd, text)
-            except BaseException:                 # Ctrl-C too: an empty lock would name no run
-                os.close(fd)
-                _remove_quietly(self.path)
-                raise
-            os.close(fd)
-            if written != len(text):
-                _remove_quietly(self.path)
-                raise TensormassError(f"output folder {self.folder}: cannot write its lock {self.path} (disk full?)")
-            self.held = True
-            key, token = str(self.path.resolve()), next(_TOKENS)
-            _HELD[key] = (token, weakref.ref(self.owner))
-            # released when the holder is dropped without close() (or at exit): no lock outlives its run
-            self._finalizer = weakref.finalize(self.owner, _unlock, key, token, str(self.path), text)
-            return
-        raise TensormassError(f"output folder {self.folder}: its lock {self.path} keeps changing hands; "
-                              "another run is starting there")
-
-    def _take_over(self, stale: dict) -> None:
-        """Move a stale lock aside, then delete it; a lock that turns out live (replaced by a new run
-        between the read and the move) is put back."""
-        aside = self.folder / f"{LOCK_NAME}.stale-{os.getpid()}"
-        try:
-            os.replace(self.path, aside)
-        except FileNotFoundError:
-            return
-        except OSError as exc:
-            raise TensormassError(f"output folder {self.folder}: cannot remove the stale lock {self.path} "
-                                  f"(pid {stale.get('pid')}, no longer running): {_reason(exc)}") from None
-        moved = FolderLock(self.folder, self.owner)
-        moved.path = aside
-        holder = moved._holder()
-        if holder is not None and holder != stale and self._alive(holder):
-            with contextlib.suppress(OSError):
-                os.link(aside, self.path)         # back where it was, unless a newer lock is there
-        _remove_quietly(aside)
-
-    def release(self) -> None:
-        if not self.held:
-            return
-        self.held = False
-        self._finalizer()
-
-
-def _unlock(key: str, token: int, path: str, text: bytes) -> None:
-    """Forget the lock taken with token, and remove its file while it still holds text (ours)."""
-    if _HELD.get(key, (None,))[0] == token:
-        del _HELD[key]
-    try:
-        with open(path, "rb") as handle:
-            ours = handle.read(256) == text
-    except OSError:
-        return
-    if ours:
-        _remove_quietly(path)
-
 
 # ============================================================================== the writer
 
@@ -633,7 +391,7 @@ class Writer:
             self._add_to_pvd(lines)
         except BaseException as exc:              # also Ctrl-C: a rerun would take the frame for a stranger's
             if not relisted:
-                _remove_quietly(target)           # a frame the .pvd does not list is no output
+                remove_quietly(target)           # a frame the .pvd does not list is no output
             self.discard()
             if not isinstance(exc, OSError):
                 raise
@@ -746,7 +504,7 @@ class Writer:
             meshio.write(tmp, m, file_format="vtu")
             os.replace(tmp, target)
         except BaseException as exc:
-            _remove_quietly(tmp)
+            remove_quietly(tmp)
             self.discard()
             kept = f"; the {len(self.frames)} frame(s) written before stay listed in {self.pvd_path}" if self.frames else ""
             if isinstance(exc, OSError):
@@ -865,14 +623,6 @@ def _interrupts_deferred():
                 previous(signal.SIGINT, caught[0])
             elif previous == signal.SIG_DFL:
                 raise KeyboardInterrupt
-
-
-def _remove_quietly(path) -> None:
-    """Remove a file on a failure path, where a second error would hide the first."""
-    try:
-        os.remove(path)
-    except OSError:
-        pass
 
 
 def _put_back_tail(fd: int, at: int) -> None:

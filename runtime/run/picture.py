@@ -32,7 +32,7 @@ title); pyvista adds lighting and smooth shading.
 Errors (TensormassError, nothing written): a path that is not *.png, is a folder, or cannot
 be written; a field name that is not among the given fields (the message lists them); values
 of the wrong length; NaN or Inf in the points, the displacement or the values; a mesh with no
-2D/3D cells. The PNG is written atomically (output.write_bytes_atomic): a reader never sees half
+2D/3D cells. The PNG is written atomically (base.files.write_bytes_atomic): a reader never sees half
 a picture and a failure leaves the previous file (or none).
 """
 from __future__ import annotations
@@ -47,7 +47,8 @@ import numpy as np
 
 from ... import elements as _types
 from ..base.errors import TensormassError
-from .output import OutputError, check_png_path, write_bytes_atomic
+from .output import OutputError, check_png_path
+from ..base.files import write_bytes_atomic
 
 __all__ = ["write_picture", "picture_of_simulation", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
 

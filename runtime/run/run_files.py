@@ -14,7 +14,7 @@ history beside it (F with .csv). On request ([output] picture / plot, run --pict
 not drawn for a run that stopped: its last state is not a result), and ``summary.png``, the
 history curves (runtime.run.curves; the same picture as `tensormass plot summary.json`).
 A run that ends before its first frame leaves no folder behind. The folder is locked from the
-first frame until the summary is written (runtime.run.output.FolderLock): a second run into the
+first frame until the summary is written (runtime.run.lock.FolderLock): a second run into the
 same folder meanwhile is refused, naming the first one's pid.
 
 Everything that can be refused is refused in prepare(), before the model is built: an unwritable

@@ -1453,7 +1453,7 @@ def _output_cases() -> None:
     add("output", "disk full while appending to the .pvd", err, r"frame\.pvd.*No space left",
         hooks=(("fail", "os:pwrite", 1, "ENOSPC", True),), wrote_before_error=True)
     add("output", "disk full while writing the summary", err, r"summary.*No space left",
-        hooks=(("fail", "tensormass.runtime.run.output:write_text_atomic", 1, "ENOSPC"),), wrote_before_error=True)
+        hooks=(("fail", "tensormass.runtime.base.files:write_text_atomic", 1, "ENOSPC"),), wrote_before_error=True)
     add("output", "permission lost while writing frames", err, r"frame_000001\.vtu.*Permission denied",
         hooks=(("fail", "meshio:write", 2, "EACCES", True),), wrote_before_error=True)
 

@@ -29,6 +29,7 @@ from tensormass.apps import commands
 from tensormass.apps.cli import main
 from tensormass.runtime.kernels import kernels
 from tensormass.runtime.run import output
+from tensormass.runtime.base import files
 from tensormass.runtime.base.errors import RunInterrupted, RunStopped
 from tensormass.runtime.mesh.container import MeshError
 from tensormass.runtime.mesh.bars import generate_bar
@@ -352,8 +353,8 @@ def test_pvd_append_touches_only_the_tail(tmp_path, monkeypatch):
     w = Writer(tmp_path, mesh)
     pvd = tmp_path / "frame.pvd"
     whole, pwrites, preads = [], [], []
-    real_atomic, real_pwrite, real_pread = output.write_atomic, os.pwrite, os.pread
-    monkeypatch.setattr(output, "write_atomic", lambda path, data: (whole.append(Path(path).name),
+    real_atomic, real_pwrite, real_pread = files.write_atomic, os.pwrite, os.pread
+    monkeypatch.setattr(files, "write_atomic", lambda path, data: (whole.append(Path(path).name),
                                                                     real_atomic(path, data)))
     monkeypatch.setattr(os, "pwrite", lambda fd, data, at: (pwrites.append((at, len(data))),
                                                             real_pwrite(fd, data, at))[1])

@@ -1,4 +1,4 @@
-"""Issue #29 item 6, outputs: one run per output folder (runtime.run.output.FolderLock), and a frame
+"""Issue #29 item 6, outputs: one run per output folder (runtime.run.lock.FolderLock), and a frame
 writer whose bookkeeping per frame does not grow with the frames written before.
 
 The lock is exercised on a tiny bar through the Writer directly and through `tensormass run`
@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 
 from tensormass.apps.cli import main
-from tensormass.runtime.run import output
+from tensormass.runtime.run import lock as lock_module, output
 from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.mesh.bars import generate_bar
-from tensormass.runtime.run.output import LOCK_NAME, FolderLock, Writer
+from tensormass.runtime.run.lock import LOCK_NAME, FolderLock
+from tensormass.runtime.run.output import Writer
 
 SCENE = """
 name = "bar"
@@ -142,7 +143,7 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path, capsys):
     scene.write_text(SCENE)
     out = tmp_path / "out"
     out.mkdir()
-    (out / LOCK_NAME).write_text(f"pid={_dead_pid()} host={output._host()} start=1\n")
+    (out / LOCK_NAME).write_text(f"pid={_dead_pid()} host={lock_module._host()} start=1\n")
     assert main(["run", str(scene), "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["frame.pvd", "frame_000000.vtu", "frame_000001.vtu",
                                                       "frame_000002.vtu", "summary.csv", "summary.json"]
@@ -150,10 +151,10 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path, capsys):
 
 def test_a_reused_pid_with_another_start_is_stale(tmp_path):
     # the lock's pid now names another process (the holder died, the pid was reused): its start differs
-    if output._process_start(os.getppid()) is None:
+    if lock_module._process_start(os.getppid()) is None:
         pytest.skip("no /proc: process starts unknown")
-    start = output._process_start(os.getppid())
-    (tmp_path / LOCK_NAME).write_text(f"pid={os.getppid()} host={output._host()} start={start + 1}\n")
+    start = lock_module._process_start(os.getppid())
+    (tmp_path / LOCK_NAME).write_text(f"pid={os.getppid()} host={lock_module._host()} start={start + 1}\n")
     w = Writer(tmp_path, _mesh())
     _frame(w, 0)
     assert (tmp_path / LOCK_NAME).read_text() == FolderLock.record()
