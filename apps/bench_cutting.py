@@ -78,7 +78,7 @@ def _organ(folder: Path) -> str | None:
 
 def _full_rebuild(sim) -> float:
     """Seconds to build the cut model from scratch and its solver state (the baseline)."""
-    from ..runtime.physics.integrators import Context
+    from ..runtime.physics.newton import Context
     from ..runtime.model.model import Model
     m, scene = sim.model, sim.model.scene
     start = time.perf_counter()

@@ -24,7 +24,8 @@ import time
 import numpy as np
 
 from ..runtime.assembly.assembly import assemble
-from ..runtime.physics.integrators import Context, stable_time_step
+from ..runtime.physics.newton import Context
+from ..runtime.physics.integrators import stable_time_step
 from ..runtime.model.model import Model
 from ..runtime.base.files import write_json_atomic
 from ..runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Output, Probe, Scene, Solver

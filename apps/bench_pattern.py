@@ -82,7 +82,7 @@ def _check_same(model) -> None:
 
 def run_pattern_bench(repeats: int = 5, quick: bool = False, progress=print) -> dict:
     from ..runtime.scene.scene import Scene
-    from ..runtime.physics.integrators import Context
+    from ..runtime.physics.newton import Context
     from ..runtime.model.model import Model
 
     report = {"repeats": repeats, "cases": {}}

@@ -137,7 +137,7 @@ def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=
     The assembly with the other kernel backend is timed too (`assembly_s_by_backend`).
     """
     # deferred: model, integrators and solvers cost ~0.2 s at every CLI start
-    from ..runtime.physics.integrators import Context
+    from ..runtime.physics.newton import Context
     from ..runtime.model.model import Model
     from ..runtime.solve.solvers import LinearSolver, has_pardiso
     by_backend = {}

@@ -192,6 +192,7 @@ def refused(outcome) -> bool:
 
 def stable_dt(scene_data) -> float:
     # deferred: model and integrators cost ~0.2 s at every CLI start
-    from ...runtime.physics.integrators import Context, stable_time_step
+    from ...runtime.physics.newton import Context
+    from ...runtime.physics.integrators import stable_time_step
     from ...runtime.model.model import Model
     return float(stable_time_step(Context(Model.from_scene(Scene.from_dict(scene_data)))))

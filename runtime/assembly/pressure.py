@@ -15,7 +15,7 @@ monitor use the work of the pressure along the path actually taken (Newton steps
 which is the potential's change (-p dV) on a closed surface.  Stiffness: closed surfaces add the
 symmetric part (exact after assembly: the symmetric solvers, band Cholesky and CG, keep working);
 open surfaces add the full non-symmetric K_p and their Newton systems are solved by LU
-(runtime.physics.integrators.Context), so Newton stays quadratic.  With solver.linear = "cg" an open
+(runtime.physics.newton.Context), so Newton stays quadratic.  With solver.linear = "cg" an open
 surface adds the symmetric part only: a quasi-Newton step that converges linearly, and may not
 converge at all when the pressure stiffness is not small against the elastic one.
 """

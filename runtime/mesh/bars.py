@@ -9,7 +9,6 @@ from .container import CellBlock, Mesh, MeshError
 
 from ... import elements as _types
 
-SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2 and _types.get(n).solid)
 # What generate_bar builds, by space dimension (a capability of the bar generator, not of the table).
 BAR_ELEMENTS = {3: ("hexahedron", "tetra", "tetra10", "wedge", "pyramid", "mixed"),
                 2: ("triangle", "triangle6", "quad", "mixed")}

@@ -16,6 +16,7 @@ from ..base.errors import TensormassError
 # Built-in types, read from the element table (types registered later: elements.get).
 NODES_PER_CELL = {name: _types.get(name).n_nodes for name in _types.builtin()}
 SOLID_TYPES_3D = tuple(n for n in _types.builtin() if _types.get(n).dim == 3 and _types.get(n).solid)
+SOLID_TYPES_2D = tuple(n for n in _types.builtin() if _types.get(n).dim == 2 and _types.get(n).solid)
 
 # Relative tolerances.  DET_TOL: det J below this times h^dim is "degenerate"
 # (h = cell bounding-box diagonal); PLANE_TOL: how far (relative to the face

@@ -297,9 +297,9 @@ def test_a_new_type_needs_only_its_table_entry(quad9):
     assert rule("quad9", "gauss3").n_points == 9 and ref.volume() == 4
     m = _quad9_mesh()
     check_mesh(m)
-    faces = faces.boundary_faces(m)
-    assert len(faces) == 6 and all(len(f[2]) == 3 for f in faces)
-    assert sum(faces.face_measure(m.points, f[2], 2) for f in faces) == pytest.approx(6.0)
+    boundary = faces.boundary_faces(m)
+    assert len(boundary) == 6 and all(len(f[2]) == 3 for f in boundary)
+    assert sum(faces.face_measure(m.points, f[2], 2) for f in boundary) == pytest.approx(6.0)
     flipped = Mesh(m.points, [CellBlock("quad9", m.blocks[0].cells[:, list(QUAD9.flip)])])
     with pytest.raises(MeshError, match="inverted"):
         check_mesh(flipped)

@@ -18,7 +18,7 @@ from tensormass.runtime.change.adapt import CRITERIA, Adapter, Change, criteria
 from tensormass.runtime.assembly.assembly import Assembler
 from tensormass.apps.commands import run_scene
 from tensormass.runtime.base.errors import TensormassError
-from tensormass.runtime.physics.integrators import Context
+from tensormass.runtime.physics.newton import Context
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.mesh.checks import check_mesh
 from tensormass.runtime.mesh.bars import generate_bar

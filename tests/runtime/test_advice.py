@@ -135,7 +135,7 @@ def test_hourglass_on_a_bending_cantilever():
     # the null space of the clamped bar's stiffness: zero-energy deformations that the constraints leave free
     K = sim.model.parts[0].kernel
     free = sim.model.free_dofs
-    from tensormass.runtime.physics.integrators import Context
+    from tensormass.runtime.physics.newton import Context
     ctx = Context(sim.model)
     ctx.model.warm_up()
     ctx.asm.warm_up()

@@ -11,7 +11,8 @@ import tensormass as tm
 from tensormass.runtime.run import simulation as simulation_module
 from tensormass.runtime.base.errors import RunInterrupted, RunStopped, TensormassError
 from tensormass.runtime.physics.health import min_det_F, safe_norm
-from tensormass.runtime.physics.integrators import Context, stable_time_step
+from tensormass.runtime.physics.newton import Context
+from tensormass.runtime.physics.integrators import stable_time_step
 from tensormass.runtime.model.model import Model
 
 

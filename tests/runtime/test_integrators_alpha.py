@@ -13,7 +13,8 @@ from tensormass.runtime.physics import integrators
 from tensormass.runtime.scene import resources
 from tensormass.runtime.assembly.assembly import assemble
 from tensormass.runtime.base.errors import SceneError, TensormassError
-from tensormass.runtime.physics.integrators import Context, make_integrator
+from tensormass.runtime.physics.newton import Context
+from tensormass.runtime.physics.integrators import make_integrator
 from tensormass.runtime.physics.integrators import GeneralizedAlpha, alpha_parameters
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver

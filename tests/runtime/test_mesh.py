@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from tensormass.runtime.mesh.io import GMSH_TO_VTK, read_mesh, to_meshio
-from tensormass.runtime.mesh.container import NODES_PER_CELL, SOLID_TYPES_3D, CellBlock, Mesh, MeshError
-from tensormass.runtime.mesh.bars import SOLID_TYPES_2D, generate_bar
+from tensormass.runtime.mesh.container import NODES_PER_CELL, SOLID_TYPES_2D, SOLID_TYPES_3D, CellBlock, Mesh, MeshError
+from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.mesh.faces import boundary_faces
 from tensormass.runtime.mesh.checks import check_mesh, orient_cells
 

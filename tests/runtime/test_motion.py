@@ -362,7 +362,8 @@ def test_a_rigid_motion_sharing_a_dof_with_another_entry_is_refused():
 
 
 def test_boundary_velocity_without_the_step_is_refused_when_boundaries_move():
-    from tensormass.runtime.physics.integrators import Context, make_integrator
+    from tensormass.runtime.physics.newton import Context
+    from tensormass.runtime.physics.integrators import make_integrator
     model = Model.from_scene(Scene.from_dict(bar("implicit_euler", steps=2)))
     integ = make_integrator(Context(model))
     with pytest.raises(TensormassError, match="moving boundaries need boundary_velocity"):

@@ -1,4 +1,4 @@
-"""Newton's convergence (runtime.physics.integrators.newton): the round-off floor, the three-field pressure
+"""Newton's convergence (runtime.physics.newton): the round-off floor, the three-field pressure
 of the locking-free formulations, and the watchdog that lets plain Newton take full steps."""
 from __future__ import annotations
 

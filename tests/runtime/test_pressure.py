@@ -6,7 +6,8 @@ import pytest
 
 from tensormass.runtime.assembly import loads
 from tensormass.runtime.base.errors import TensormassError
-from tensormass.runtime.physics.integrators import Context, make_integrator
+from tensormass.runtime.physics.newton import Context
+from tensormass.runtime.physics.integrators import make_integrator
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.assembly.pressure import FollowerPressure
@@ -104,17 +105,17 @@ def test_small_pressure_acts_like_the_inward_traction():
 def test_newton_converges_quadratically_under_a_large_follower_pressure(monkeypatch):
     """200 Pa on the top face (an open surface) bends the bar by ~35 % of its length: Newton with
     the full pressure stiffness (LU) converges quadratically in the end."""
-    from tensormass.runtime.physics import integrators
+    from tensormass.runtime.physics import newton as integrators
     model = _bar_model("tetra10", 200.0, steps=2)
     assert not model.pressure.closed and not model.pressure.symmetric
     residuals = []
-    search = integrators._line_search
+    search = integrators.line_search
 
     def spy(potential, u, d, g, *args):
         residuals.append(float(np.linalg.norm(g[potential.free])))
         return search(potential, u, d, g, *args)
 
-    monkeypatch.setattr(integrators, "_line_search", spy)
+    monkeypatch.setattr(integrators, "line_search", spy)
     ctx = Context(model)
     integ = make_integrator(ctx)
     its = [integ.step(k)["newton"] for k in range(1, integ.n_steps + 1)]

@@ -170,10 +170,11 @@ def test_mesh_file_is_refused_right_after_reading(tmp_path, monkeypatch):
 
 
 def test_model_checks_the_limit_before_building(monkeypatch):
+    from tensormass.runtime.model import model as model_module
     from tensormass.runtime.model.model import Model
     from tensormass.runtime.scene.scene import Material
     mesh = generate_bar((1.0, 0.2, 0.2), (6, 2, 2))
-    monkeypatch.setattr(mesh_module, "check_mesh", lambda m: pytest.fail("checked a refused mesh"))
+    monkeypatch.setattr(model_module, "check_mesh", lambda m: pytest.fail("checked a refused mesh"))
     with pytest.raises(ResourceError, match="model 'model' needs an estimated"):
         Model(mesh, [Material(E=1e6, nu=0.3)], max_memory="1M")
 
@@ -226,7 +227,8 @@ def test_refinement_rounds_grow_the_estimate():
 
 def _warm(data):
     """Load and compile the kernels once, so that the measured run allocates only its arrays."""
-    from tensormass.runtime.physics.integrators import Context, make_integrator
+    from tensormass.runtime.physics.newton import Context
+    from tensormass.runtime.physics.integrators import make_integrator
     from tensormass.runtime.model.model import Model
     small = dict(data, mesh=dict(data["mesh"], cells=[1, 1, 1]))
     model = Model.from_scene(Scene.from_dict(small))
@@ -238,7 +240,8 @@ def _warm(data):
 
 def _measured_peak(data) -> tuple:
     """(traced peak bytes of mesh, model, pattern and two steps; the scene's estimate)."""
-    from tensormass.runtime.physics.integrators import Context, make_integrator
+    from tensormass.runtime.physics.newton import Context
+    from tensormass.runtime.physics.integrators import make_integrator
     from tensormass.runtime.model.model import Model
     scene = Scene.from_dict(data, load_mesh=False, max_memory="64G")
     tracemalloc.start()

@@ -9,7 +9,8 @@ import pytest
 from tensormass.runtime.kernels import kernels as kernels_module
 from tensormass.runtime.assembly.assembly import Assembler, assemble, project_psd
 from tensormass.runtime.base.errors import RunStopped, TensormassError
-from tensormass.runtime.physics.integrators import Context, stable_time_step
+from tensormass.runtime.physics.newton import Context
+from tensormass.runtime.physics.integrators import stable_time_step
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, NodalLoad, Probe, Scene, Solver
