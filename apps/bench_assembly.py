@@ -139,7 +139,7 @@ def _runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeat
     from ..runtime.base import parallel
     from ..runtime.assembly.assembly import Assembler
     from ..runtime.model.model import Model
-    from ..runtime.scene.scene import Material, Solver
+    from ..runtime.scene.types import Material, Solver
     model = Model(mesh, [Material(law=LAW, quadrature=quadrature, E=1.0e6, nu=0.3)],
                   solver=Solver(backend=backend), check=False)
     asm = Assembler(model)

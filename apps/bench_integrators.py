@@ -28,7 +28,8 @@ from ..runtime.physics.newton import Context
 from ..runtime.physics.integrators import stable_time_step
 from ..runtime.model.model import Model
 from ..runtime.base.files import write_json_atomic
-from ..runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Output, Probe, Scene, Solver
+from ..runtime.scene.types import Fixed, Loads, Material, MeshSpec, Output, Probe, Solver
+from ..runtime.scene.scene import Scene
 from ..runtime.run.simulation import Simulation
 from .machine import machine_info
 

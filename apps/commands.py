@@ -22,7 +22,8 @@ from importlib import resources
 from pathlib import Path
 
 from ..runtime.base.errors import RunInterrupted, RunStopped, TensormassError
-from ..runtime.scene.scene import Scene, picture_field
+from ..runtime.scene.scene import Scene
+from ..runtime.scene.parser import picture_field
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
            "DEMO_OUT", "print_advice"]

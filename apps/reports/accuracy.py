@@ -75,7 +75,8 @@ from pathlib import Path
 
 from ...runtime.base.errors import TensormassError
 from ...runtime.base.files import write_bytes_atomic
-from ...runtime.scene.scene import Scene, SceneError
+from ...runtime.scene.scene import Scene
+from ...runtime.base.errors import SceneError
 from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook

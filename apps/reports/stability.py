@@ -30,7 +30,8 @@ import numpy as np
 
 from ...runtime.base.errors import TensormassError
 from ...runtime.base.files import write_text_atomic
-from ...runtime.scene.scene import Material, Scene
+from ...runtime.scene.types import Material
+from ...runtime.scene.scene import Scene
 from .springs_stability import case_spring_compression, case_spring_extremes
 from .stability_runs import (COLUMNS, BAR, DIVERGED, GRAVITY, INVALID, RECOVERED, STABLE, Run, any_detected, clean,
                              md, min_det_F, num, outcome_in, refused, scene_dict, short, stable_dt)

@@ -37,7 +37,7 @@ from numba import njit
 
 from ... import elements as _types
 from ..base.errors import TensormassError
-from ..scene.scene import switch_applies
+from ..mesh.regions import switch_applies
 
 __all__ = ["CRITERIA", "Adapter", "Change", "criteria", "part_criteria", "mean_deformation_gradients"]
 

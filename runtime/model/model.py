@@ -36,7 +36,7 @@ from ..physics.motion import Motion
 from ..mesh.probes import PointProbe, locate_point
 from ..mesh.regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
     prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
-from ..scene.scene import Loads, Output, Solver
+from ..scene.types import Loads, Output, Solver
 from ..scene.formulation_check import check_element as _check_formulation_element, formulation_name
 from ..assembly.volumetric import VolumetricCoupling, volumetric_functions
 from ..scene.mesh_source import build_mesh, scene_mesh

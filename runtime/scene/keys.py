@@ -95,7 +95,7 @@ KEYS = (
     Key("", "remove", "array of tables", doc="See [[remove]]."),
     Key("", "refine", "array of tables", doc="See [[refine]]."),
     # -- [mesh] --------------------------------------------------------------------------------
-    Key("mesh", "generate", "string", choices="runtime.scene.scene:GENERATORS",
+    Key("mesh", "generate", "string", choices="runtime.scene.parser:GENERATORS",
         doc="A generated mesh: bar (a box of cells), plate or sphere (shell triangles), ball (solid "
             "tetrahedra). Give exactly one of generate and file."),
     Key("mesh", "file", "string (path)",
@@ -180,10 +180,10 @@ KEYS = (
         doc="Normal to the deformed surface; > 0 pushes inward."),
     Key("loads.pressure", "amplitude", "string", doc="An amplitude scaling it (dynamic runs only)."),
     # -- [solver] --------------------------------------------------------------------------------
-    Key("solver", "kind", "string", "static", choices="runtime.scene.scene:SOLVER_KINDS", doc="The integrator."),
+    Key("solver", "kind", "string", "static", choices="runtime.scene.parser:SOLVER_KINDS", doc="The integrator."),
     Key("solver", "dt", "number", 0.01, "s", doc="The time step (dynamic runs), > 0."),
     Key("solver", "steps", "integer", 1, doc="Time steps (dynamic) or load steps (static), 1 to 10^8."),
-    Key("solver", "linear", "string", "auto", choices="runtime.scene.scene:LINEAR_SOLVERS", doc="The linear solver."),
+    Key("solver", "linear", "string", "auto", choices="runtime.scene.parser:LINEAR_SOLVERS", doc="The linear solver."),
     Key("solver", "cg_tolerance", "number", 1e-8, "1", doc="Relative residual of the CG solves."),
     Key("solver", "cg_max_iterations", "integer", 1000, doc="CG iterations at most."),
     Key("solver", "newton_tolerance", "number", 1e-8, "1", doc="Newton's relative residual."),
@@ -201,9 +201,9 @@ KEYS = (
         doc="Stop when the energy balance grows by this times the scene's energy scale."),
     Key("solver", "max_displacement", "number", 10.0, "1",
         doc="Stop when a node moves this many body sizes away from the body's mean motion."),
-    Key("solver", "on_inversion", "string", "warn", choices="runtime.scene.scene:INVERSION_ACTIONS",
+    Key("solver", "on_inversion", "string", "warn", choices="runtime.scene.parser:INVERSION_ACTIONS",
         doc="Inverted elements of laws defined there: warn (invalid if still inverted at the end) or stop."),
-    Key("solver", "mass", "string", "lumped", choices="runtime.scene.scene:MASS_KINDS",
+    Key("solver", "mass", "string", "lumped", choices="runtime.scene.parser:MASS_KINDS",
         doc="Lumped (row sums, HRZ for quadratic elements) or consistent (implicit solvers only)."),
     Key("solver", "threads", "integer", default_text="$TENSORMASS_THREADS, else every core",
         doc="Assembly threads (tensormass run --threads overrides)."),
@@ -224,10 +224,10 @@ KEYS = (
         doc="A PNG of the deformed body at the end: true (von Mises), a field name or \"displacement\"."),
     Key("output", "plot", "boolean", False, doc="The per-step history curves as summary.png."),
     # -- [[adapt]] -------------------------------------------------------------------------------
-    Key("adapt", "criterion", "string", REQUIRED, choices="runtime.scene.scene:ADAPT_CRITERIA",
+    Key("adapt", "criterion", "string", REQUIRED, choices="runtime.scene.parser:ADAPT_CRITERIA",
         doc="The per-element criterion (rotation in degrees)."),
     Key("adapt", "threshold", "number", REQUIRED, doc="The criterion's threshold, >= 0 (relative: in [0, 1])."),
-    Key("adapt", "action", "string", "switch_law", choices="runtime.scene.scene:ADAPT_ACTIONS", doc="What a passing cell does."),
+    Key("adapt", "action", "string", "switch_law", choices="runtime.scene.parser:ADAPT_ACTIONS", doc="What a passing cell does."),
     Key("adapt", "law", "string", choices="laws:names", doc="switch_law: the target law (required there)."),
     Key("adapt", "from", "string", choices="laws:names", doc="switch_law: only cells under this law."),
     Key("adapt", "back", "number", doc="switch_law: switch back past this value (hysteresis)."),
@@ -242,7 +242,7 @@ KEYS = (
         doc="The plane (rest coordinates): faces between cells whose centroids lie on either side open."),
     Key("cut", "box", _BOX, unit="m", doc="Only the faces inside: an incision (a blade's start)."),
     Key("cut", "name", "string", doc="The event's name in the summary."),
-    Key("cut", "criterion", "string", choices="runtime.scene.scene:TEAR_CRITERIA",
+    Key("cut", "criterion", "string", choices="runtime.scene.parser:TEAR_CRITERIA",
         doc="Tearing: open the faces across which the body is stretched past 1 + threshold."),
     Key("cut", "threshold", "number", unit="1", doc="Tearing: the stretch - 1 at which a face opens, > 0."),
     Key("cut", "every", "integer", 1, doc="Tearing: checked every this many steps."),
@@ -266,7 +266,7 @@ MATERIAL_LAW_PARAMETERS = "the law's native parameters and options (see the cata
 
 def mesh_elements() -> tuple:
     """What mesh.element accepts: the generated bars' element types (mixed included) and shell."""
-    from .scene import ELEMENTS_2D, ELEMENTS_3D
+    from .parser import ELEMENTS_2D, ELEMENTS_3D
     return tuple(dict.fromkeys(ELEMENTS_3D + ELEMENTS_2D + ("shell",)))
 
 

@@ -23,7 +23,8 @@ from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.mesh.checks import check_mesh
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Adapt, Fixed, Material, SceneError
+from tensormass.runtime.scene.types import Adapt, Fixed, Material
+from tensormass.runtime.base.errors import SceneError
 
 E, NU, RHO = 1e6, 0.3, 800.0
 L, B, H = 1.2, 0.2, 0.2

@@ -13,7 +13,8 @@ from tensormass import laws
 from tensormass.runtime.scene import advice as adv
 from tensormass.runtime.kernels import hourglass
 from tensormass.runtime.base.errors import TensormassError
-from tensormass.runtime.scene.scene import Material, Scene
+from tensormass.runtime.scene.types import Material
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
 

@@ -15,7 +15,7 @@ from tensormass.runtime.base.errors import DegenerateElementError, TensormassErr
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.run.output import Writer
-from tensormass.runtime.scene.scene import Fixed, Loads, Material, NodalLoad, Probe, Solver
+from tensormass.runtime.scene.types import Fixed, Loads, Material, NodalLoad, Probe, Solver
 from tensormass.runtime.run.simulation import Simulation
 
 E, NU, AREA, RHO = 2.0e11, 0.3, 1.0e-4, 7800.0
@@ -327,7 +327,7 @@ def test_scalar_model_refuses_what_it_cannot_mean(spring2d):
     with pytest.raises(TensormassError, match=r"fixed\[0\].components must be in 0..0"):
         Model(mesh, [_material()], fixed=[Fixed(box=_box(pts[0]), components=(1,))], loads=Loads(gravity=(0, 0)))
     with pytest.raises(TensormassError, match=r"\[\[adapt\]\] rules need solid elements"):
-        from tensormass.runtime.scene.scene import Adapt
+        from tensormass.runtime.scene.types import Adapt
         Model(mesh, [_material()], fixed=fixed, loads=Loads(gravity=(0, 0)),
               adapt=[Adapt(criterion="R_S", threshold=1.0, action="switch_law", law="stvk")])
 

@@ -20,7 +20,8 @@ from tensormass.runtime.base.errors import SceneError, TensormassError
 from tensormass.runtime.kernels.kernels import Kernel, load_kernel
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Adapt, Material, Scene
+from tensormass.runtime.scene.types import Adapt, Material
+from tensormass.runtime.scene.scene import Scene
 
 LAWS = ["hooke", "stvk", "neohookean", "stable_neohookean", "mooney_rivlin"]
 YOUNG, NU = 1000.0, 0.3

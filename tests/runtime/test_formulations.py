@@ -13,7 +13,7 @@ from tensormass.runtime.physics.formulations import FORMULATIONS
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Material
+from tensormass.runtime.scene.types import Material
 from tensormass.runtime.mesh.uniform import to_quadratic
 
 CASES = [(form, el) for form, els in FORMULATIONS.items() if els for el in els]

@@ -6,7 +6,8 @@ import pytest
 
 from tensormass.runtime.run import simulation as simulation_module
 from tensormass.runtime.run.history import History, write_history_csv
-from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
+from tensormass.runtime.scene.types import Fixed, Loads, Material, MeshSpec, Probe, Solver
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
 L, B, H = 1.2, 0.2, 0.2

@@ -17,7 +17,8 @@ from tensormass.runtime.physics.newton import Context
 from tensormass.runtime.physics.integrators import make_integrator
 from tensormass.runtime.physics.integrators import GeneralizedAlpha, alpha_parameters
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, Probe, Scene, Solver
+from tensormass.runtime.scene.types import Fixed, Loads, Material, MeshSpec, Probe, Solver
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
 L, B, H = 1.2, 0.2, 0.2

@@ -17,7 +17,7 @@ from tensormass.runtime.assembly import loads
 from tensormass.runtime.assembly.mass import element_mass, lump
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Fixed, Loads, Material, NodalLoad, Solver
+from tensormass.runtime.scene.types import Fixed, Loads, Material, NodalLoad, Solver
 
 RNG = np.random.default_rng(12)
 

@@ -17,7 +17,8 @@ from tensormass.runtime.mesh.mesh_groups import Group, read_groups
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.mesh.regions import (assign_materials, find_group, known_regions, region_faces,
     region_nodes)
-from tensormass.runtime.scene.scene import Fixed, Material, NodalLoad, Probe, Scene, Loads
+from tensormass.runtime.scene.types import Fixed, Material, NodalLoad, Probe, Loads
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
 L, W = 1.0, 0.2

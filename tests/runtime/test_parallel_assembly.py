@@ -9,7 +9,9 @@ from tensormass.runtime.assembly.assembly import Assembler, _project_psd_referen
 from tensormass.runtime.base.errors import InvertedElementError, TensormassError
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Scene, SceneError, Solver
+from tensormass.runtime.scene.types import Adapt, Fixed, Material, Solver
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 
 E, NU = 1e6, 0.3
 CLAMP = Fixed(box=((-1, -1, -1), (0, 1, 1)))

@@ -183,7 +183,7 @@ def test_whole_runs_agree_with_the_band_solver(linear):
 
 
 def test_scene_solver_names_are_the_runtime_methods():
-    from tensormass.runtime.scene.scene import LINEAR_SOLVERS
+    from tensormass.runtime.scene.parser import LINEAR_SOLVERS
     assert LINEAR_SOLVERS == solvers.METHODS
 
 

@@ -11,7 +11,7 @@ from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.assembly.pattern import (_ReferencePattern, _reference_by_nodes,
     _reference_submatrix_map)
-from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Solver
+from tensormass.runtime.scene.types import Adapt, Fixed, Material, Solver
 
 FIELDS = ("indices", "indptr", "diagonal", "_rows")
 

@@ -11,8 +11,9 @@ from tensormass.runtime.physics.integrators import make_integrator
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.assembly.pressure import FollowerPressure
-from tensormass.runtime.scene.scene import (Fixed, Loads, Material, NodalLoad, PressureLoad, Scene,
-    SceneError, Solver)
+from tensormass.runtime.scene.types import Fixed, Loads, Material, NodalLoad, PressureLoad, Solver
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 from tensormass.runtime.run.simulation import Simulation
 
 

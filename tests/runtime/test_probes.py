@@ -111,7 +111,7 @@ def test_a_probe_within_the_tolerance_reads_the_nearest_point_of_the_body():
 
 def test_the_model_reports_interpolated_probes_and_refuses_points_off_the_body():
     from tensormass.runtime.model.model import Model
-    from tensormass.runtime.scene.scene import Material, Probe
+    from tensormass.runtime.scene.types import Material, Probe
     mesh = generate_bar((1.0, 0.2, 0.2), (4, 1, 1), "tetra10")
     mat = [Material(law="hooke", E=1e6, nu=0.3)]
     model = Model(mesh, mat, probes=[Probe("mid", (0.3, 0.05, 0.15))])

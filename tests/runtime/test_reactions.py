@@ -6,8 +6,8 @@ import pytest
 
 from tensormass.runtime.base.errors import SceneError, TensormassError
 from tensormass.runtime.physics.reactions import Reactions
-from tensormass.runtime.scene.scene import (Fixed, Loads, Material, MeshSpec, NodalLoad, PressureLoad, Scene,
-    Solver)
+from tensormass.runtime.scene.types import Fixed, Loads, Material, MeshSpec, NodalLoad, PressureLoad, Solver
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.physics.motion import Amplitude, Rotation
 from tensormass.runtime.run.simulation import Simulation
 

@@ -14,7 +14,8 @@ from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model, assign_materials as model_assign
 from tensormass.runtime.mesh.regions import (BOX_TOLERANCE, assign_materials, box_bounds, box_contains,
     box_tolerance, check_unused_materials, material_groups, prescribed_values, reachable_laws, region_mask)
-from tensormass.runtime.scene.scene import Adapt, Fixed, Material, Scene, Solver
+from tensormass.runtime.scene.types import Adapt, Fixed, Material, Solver
+from tensormass.runtime.scene.scene import Scene
 
 
 def tagged_quads() -> Mesh:

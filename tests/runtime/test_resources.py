@@ -14,7 +14,8 @@ from tensormass.runtime.scene import resources
 from tensormass.runtime.mesh.bars import bar_counts, generate_bar
 from tensormass.runtime.mesh.io import to_meshio
 from tensormass.runtime.scene.resources import MeshCounts, ResourceError, estimate, limit_bytes, parse_size
-from tensormass.runtime.scene.scene import Scene, Solver
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.scene.types import Solver
 
 GiB = 2 ** 30
 
@@ -172,7 +173,7 @@ def test_mesh_file_is_refused_right_after_reading(tmp_path, monkeypatch):
 def test_model_checks_the_limit_before_building(monkeypatch):
     from tensormass.runtime.model import model as model_module
     from tensormass.runtime.model.model import Model
-    from tensormass.runtime.scene.scene import Material
+    from tensormass.runtime.scene.types import Material
     mesh = generate_bar((1.0, 0.2, 0.2), (6, 2, 2))
     monkeypatch.setattr(model_module, "check_mesh", lambda m: pytest.fail("checked a refused mesh"))
     with pytest.raises(ResourceError, match="model 'model' needs an estimated"):

@@ -13,7 +13,8 @@ from tensormass.runtime.physics.newton import Context
 from tensormass.runtime.physics.integrators import stable_time_step
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.scene.scene import Fixed, Loads, Material, MeshSpec, NodalLoad, Probe, Scene, Solver
+from tensormass.runtime.scene.types import Fixed, Loads, Material, MeshSpec, NodalLoad, Probe, Solver
+from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 from tensormass.runtime.solve.solvers import LinearSolver
 

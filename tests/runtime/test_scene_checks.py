@@ -13,7 +13,9 @@ from tensormass.runtime.mesh.container import MeshError
 from tensormass.runtime.mesh.checks import check_coordinates, check_mesh
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.mesh.io import to_meshio
-from tensormass.runtime.scene.scene import MAX_STEPS, Scene, SceneError
+from tensormass.runtime.scene.parser import MAX_STEPS
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 
 BASE = {
     "mesh": {"generate": "bar", "size": [1.0, 0.2, 0.2], "cells": [4, 1, 1], "element": "hexahedron"},
@@ -145,7 +147,7 @@ def test_compatible_fixed_entries_are_accepted():
 
 def test_model_refuses_conflicting_constraints_too():
     from tensormass.runtime.model.model import Model
-    from tensormass.runtime.scene.scene import Fixed, Material
+    from tensormass.runtime.scene.types import Fixed, Material
     mesh = generate_bar((1.0, 0.2, 0.2), (4, 1, 1))
     fixed = [Fixed(box=((-1, -1, -1), (0.3, 1, 1))),
              Fixed(box=((0.2, -1, -1), (0.3, 1, 1)), displacement=(0.0, 0.0, 0.5), components=(2,))]

@@ -7,7 +7,8 @@ import re
 import pytest
 
 from tensormass.runtime.physics.formulations import FORMULATIONS
-from tensormass.runtime.scene.scene import Scene, SceneError
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 
 SCENE = """
 [mesh]

@@ -13,7 +13,7 @@ import re
 import pytest
 
 from tensormass import laws
-from tensormass.runtime.scene import scene as scene_module
+from tensormass.runtime.scene import types as scene_module
 from tensormass.runtime.base.errors import SceneError
 from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.scene.keys import KEYS, NO_DEFAULT, REQUIRED, TABLES, allowed_values, keys_of

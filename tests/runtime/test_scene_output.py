@@ -20,7 +20,8 @@ from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.mesh.io import to_meshio
 from tensormass.runtime.run.output import Writer
-from tensormass.runtime.scene.scene import Scene, SceneError
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))

@@ -6,7 +6,8 @@ import pytest
 
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.mesh.checks import check_mesh
-from tensormass.runtime.scene.scene import Scene, SceneError
+from tensormass.runtime.scene.scene import Scene
+from tensormass.runtime.base.errors import SceneError
 from tensormass.runtime.mesh.solids import ball_tetrahedra, boundary_faces, tetra_quality, tetra_volumes
 from tensormass.runtime.physics.volume_constraint import VolumeConstraint
 

@@ -7,7 +7,7 @@ import pytest
 
 import tensormass as tm
 from tensormass.runtime.base.errors import TensormassError
-from tensormass.runtime.scene.scene import SceneError
+from tensormass.runtime.base.errors import SceneError
 
 SCENE = """
 [mesh]

@@ -10,7 +10,7 @@ from tensormass.apps.reports import cylinder as C
 from tensormass.apps.reports.common import run_dict
 from tensormass.runtime.scene import advice as adv
 from tensormass.runtime.physics.formulations import locking_free_choice
-from tensormass.runtime.scene.scene import Material
+from tensormass.runtime.scene.types import Material
 
 
 def _error(tmp_path, element, nu, formulation, cells=(6, 12)):
