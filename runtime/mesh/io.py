@@ -16,7 +16,7 @@ from ... import elements as _types
 # hexahedron20/27 and pyramid13 itself): gmsh's prism has its base triangle (0, 1, 2) wound the
 # other way round (counterclockwise seen from the top face), VTK's wedge clockwise.  The other
 # types tensormass supports (tetra, tetra10, hexahedron, pyramid, triangle, triangle6, quad) are
-# read from gmsh files with positive volume as they are (tests/runtime/test_msh_node_order.py).
+# read from gmsh files with positive volume as they are (tests/runtime/mesh/test_msh_node_order.py).
 GMSH_TO_VTK = {"wedge": [0, 2, 1, 3, 5, 4]}
 
 # Cell data names that carry integer region tags, most specific first.

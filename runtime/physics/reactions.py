@@ -44,7 +44,7 @@ the centroid of the entry's nodes at rest, as given in "point"):
 In 2D the moment is the scalar z component (a 1-entry list in histories).  Units: N and N m
 (2D: per unit thickness, N/m and N m/m).  With this moment, the axial moment about a rotating
 support's axis is dPi/dtheta, the derivative of the equilibrium potential energy with respect
-to the rotation angle (radians): what tests/runtime/test_reactions.py checks.
+to the rotation angle (radians): what tests/runtime/physics/test_reactions.py checks.
 """
 from __future__ import annotations
 

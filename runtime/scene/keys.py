@@ -2,7 +2,7 @@
 
 The scene parser (runtime.scene.scene) is the authority on what a scene accepts; this table describes
 the same keys for people (the documentation's scene-key reference is generated from it) and for
-tools that check TOML fragments.  tests/runtime/test_scene_keys.py keeps the two in agreement: the
+tools that check TOML fragments.  tests/runtime/scene/test_scene_keys.py keeps the two in agreement: the
 keys of every table are the ones the parser accepts, the defaults are the parser's dataclass
 defaults, and every list of allowed values named here resolves.
 

@@ -13,7 +13,7 @@ number of negative pivots tells the caller whether a Newton matrix is indefinite
 
 Reproducibility: MKL's conditional numerical reproducibility mode for PARDISO (iparm[33],
 set to REPRODUCIBLE_THREADS) makes the factor and the solution the same bits for any
-thread count up to that number (checked by tests/runtime/test_pardiso.py for 1 and 2).
+thread count up to that number (checked by tests/runtime/solve/test_pardiso.py for 1 and 2).
 
 Why not pypardiso: it hides the phases (it factors and solves in one call, keyed by a hash
 of the matrix), where the runtime needs one symbolic analysis per sparsity pattern, a

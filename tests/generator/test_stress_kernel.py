@@ -5,7 +5,7 @@ against quantities computed here from the other kernel outputs: v against point_
 F = I + sum_i u_i (x) G_i from point_gradients(D), the volume-weighted W against energy(), and
 the chain rule f_i = -sum_q v P G_i against forces(): so the layout, F, P and W cannot drift
 apart from the kernels the solver uses. The analytic values per law (P33 of plane strain
-included) are in tests/runtime/test_fields.py."""
+included) are in tests/runtime/physics/test_fields.py."""
 from __future__ import annotations
 
 import os

@@ -2,7 +2,7 @@
 
 A half ellipsoid hanging from its flat face (z = 0): semi-axes 40 x 30 mm, 50 mm deep, tetra10
 with midside nodes on the curved surface, physical groups "organ" (volume) and "attached"
-(the flat face).  Used by tests/runtime/test_loads.py (consistent loads against FElupe).
+(the flat face).  Used by tests/runtime/assembly/test_loads.py (consistent loads against FElupe).
 
     python tests/runtime/data/make_organ.py [h_in_m]
 """

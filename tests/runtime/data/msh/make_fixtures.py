@@ -1,4 +1,4 @@
-"""Make the small gmsh .msh fixtures of tests/runtime/test_msh_node_order.py (needs the gmsh package).
+"""Make the small gmsh .msh fixtures of tests/runtime/mesh/test_msh_node_order.py (needs the gmsh package).
 
     python tests/runtime/data/msh/make_fixtures.py [OUT_DIR]      # default: this folder
 

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from tensormass.runtime.solve import solvers
 from tensormass.runtime.solve.solvers import LinearSolver
 
-sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), os.pardir, "solve"))
 from test_solvers import spd_system  # noqa: E402
 
 

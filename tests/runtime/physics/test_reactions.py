@@ -276,10 +276,10 @@ def test_the_state_evaluation_matches_the_solvers_residual():
 
 
 def test_entries_selecting_mesh_regions(tmp_path):
-    """[[fixed]] by a mesh group (tests/runtime/test_mesh_regions.py's bar: 'clamp' at x = 0, 'tip' at x = 1)."""
+    """[[fixed]] by a mesh group (tests/runtime/mesh/test_mesh_regions.py's bar: 'clamp' at x = 0, 'tip' at x = 1)."""
     import sys
     from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent))
+    sys.path.insert(0, str(Path(__file__).parents[1] / "mesh"))
     from test_mesh_regions import write_bar
     from tensormass.runtime.mesh.io import read_mesh
     from tensormass.runtime.model.model import Model

@@ -17,7 +17,7 @@ import pytest
 from tensormass.runtime.run.curves import history_groups, history_panels, plot_history
 from tensormass.runtime.base.errors import TensormassError
 
-DATA = Path(__file__).resolve().parents[1] / "apps" / "data"
+DATA = Path(__file__).resolve().parents[2] / "apps" / "data"
 PIL = pytest.importorskip("PIL.Image")
 
 

@@ -181,7 +181,7 @@ def test_material_matching_no_cell_is_refused():
 def test_every_example_uses_every_material():
     """The checks above must not refuse the shipped examples (they load their meshes here)."""
     from pathlib import Path
-    for path in sorted((Path(__file__).resolve().parents[2] / "examples").glob("*.toml")):
+    for path in sorted((Path(__file__).resolve().parents[3] / "examples").glob("*.toml")):
         scene_ = Scene.from_toml(path)
         used = {int(i) for w in scene_.assign_materials() for i in np.unique(w)}
         assert used == set(range(len(scene_.materials))), path.name

@@ -1,7 +1,7 @@
 """Soak measurement (not a test): ms per frame of runtime.run.output.Writer over N frames (default 6 000) on a
 small mesh, the median of the first and of the last 200 frames. Constant cost per frame: the two agree.
 
-    python tests/runtime/soak_writer.py [N]
+    python tests/runtime/run/soak_writer.py [N]
 """
 import sys, time, tempfile
 import numpy as np

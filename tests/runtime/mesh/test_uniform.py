@@ -13,7 +13,7 @@ from tensormass.runtime.mesh.io import read_mesh
 from tensormass.runtime.mesh.probes import shape_functions
 from tensormass.runtime.mesh.uniform import refine_uniform, to_linear, to_quadratic
 
-DATA = Path(__file__).resolve().parents[1] / "apps" / "reports" / "data"
+DATA = Path(__file__).resolve().parents[2] / "apps" / "reports" / "data"
 
 
 def _rule(dim):

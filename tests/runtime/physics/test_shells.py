@@ -150,7 +150,7 @@ def test_strip_rolled_by_an_end_moment_follows_the_elastica(tmp_path):
 
 def tm_example(name):
     from pathlib import Path
-    return Path(__file__).resolve().parents[2] / "examples" / "shells" / name
+    return Path(__file__).resolve().parents[3] / "examples" / "shells" / name
 
 
 def test_shell_masses_carry_rotary_inertia():

@@ -247,7 +247,7 @@ def test_consistent_mass_operator_conserves_mass_and_is_symmetric():
 
 # --------------------------------------------------------------------------- the gmsh organ
 
-ORGAN = Path(__file__).with_name("data") / "organ_tetra10.msh"
+ORGAN = Path(__file__).parents[1].joinpath("data") / "organ_tetra10.msh"
 E_ORGAN, NU_ORGAN, RHO_ORGAN, G_ORGAN = 5.0e3, 0.45, 1000.0, 9.81
 ORGAN_SCENE = f"""
 name = "organ"

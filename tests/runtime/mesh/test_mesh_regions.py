@@ -300,7 +300,7 @@ def test_groups_follow_refinement(bar, share):
 def test_groups_follow_refinement_in_2d():
     from tensormass.runtime.mesh.refine import refine
     from pathlib import Path
-    mesh = read_mesh(Path(__file__).parent / "data" / "msh" / "triangle_v41.msh")
+    mesh = read_mesh(Path(__file__).parents[1] / "data" / "msh" / "triangle_v41.msh")
     fine = refine(mesh, np.ones(mesh.n_cells, bool)).mesh
     check_mesh(fine)
     side = region_nodes(fine, "side")
@@ -338,7 +338,7 @@ def test_msh2_cells_listed_once_per_group_are_one_cell(tmp_path):
 
 def test_2d_curve_groups_carry_tractions():
     from pathlib import Path
-    data = Path(__file__).parent / "data" / "msh"
+    data = Path(__file__).parents[1] / "data" / "msh"
     for name, ftype in (("triangle6_v41.msh", "line3"), ("quad_v22b.msh", "line"), ("triangle_v41.msh", "line")):
         mesh = read_mesh(data / name)
         faces = region_faces(mesh, "side")

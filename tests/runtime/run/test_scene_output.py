@@ -23,7 +23,7 @@ from tensormass.runtime.run.output import Writer
 from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.base.errors import SceneError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
 HAVE_SIMULATION = (ROOT / "runtime" / "simulation.py").exists()
 

@@ -324,7 +324,7 @@ def test_a_notched_slab_pulled_apart_tears_through():
     """The tearing example: the notch's front opens first, the tear runs across, the halves separate."""
     from tensormass.runtime.change.events import pieces
     from pathlib import Path
-    path = Path(__file__).parents[2] / "examples" / "cutting" / "slab_tearing.toml"
+    path = Path(__file__).parents[3] / "examples" / "cutting" / "slab_tearing.toml"
     sim = tm.Simulation(tm.Scene.from_toml(path), output=False)
     summary = sim.run()
     assert summary.status == "ok", summary.message
@@ -542,7 +542,7 @@ def test_refinement_is_refused_where_it_cannot_apply():
 def test_every_cutting_example_sets_up():
     """The shipped examples load, and their events rehearse on the rest mesh (what a run does first)."""
     from pathlib import Path
-    folder = Path(__file__).parents[2] / "examples" / "cutting"
+    folder = Path(__file__).parents[3] / "examples" / "cutting"
     names = []
     for path in sorted(folder.glob("*.toml")):
         sim = tm.Simulation(tm.Scene.from_toml(path), output=False)

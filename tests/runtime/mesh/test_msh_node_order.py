@@ -16,7 +16,7 @@ from tensormass.runtime.mesh.faces import sample_dets, boundary_faces
 from tensormass.runtime.mesh.checks import check_mesh
 from tensormass.runtime.mesh.regions import region_nodes
 
-DATA = Path(__file__).parent / "data" / "msh"
+DATA = Path(__file__).parents[1] / "data" / "msh"
 FILES = sorted(DATA.glob("*.msh"))
 # the fixtures are boxes [0, 1] x [0, 0.6] x [0, 0.4] (3D) and rectangles [0, 1] x [0, 0.6] (2D)
 VOLUME = {3: 1.0 * 0.6 * 0.4, 2: 1.0 * 0.6}

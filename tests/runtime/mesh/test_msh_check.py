@@ -9,7 +9,7 @@ from tensormass.runtime.mesh.container import MeshError
 from tensormass.runtime.mesh.io import read_mesh
 from tensormass.runtime.mesh.msh_check import check_msh
 
-DATA = Path(__file__).parent / "data" / "msh"
+DATA = Path(__file__).parents[1] / "data" / "msh"
 
 
 def _lines(name):

@@ -10,7 +10,7 @@ import pytest
 from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
-ORGAN = Path(__file__).resolve().parents[2] / "examples" / "organ" / "organ.msh"
+ORGAN = Path(__file__).resolve().parents[3] / "examples" / "organ" / "organ.msh"
 
 
 def _bar(law, nu, formulation, gravity, cells=(6, 2, 2), size=(1.0, 0.2, 0.2), E=1.0e6):

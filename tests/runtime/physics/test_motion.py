@@ -18,7 +18,7 @@ from tensormass.runtime.physics.motion import Amplitude, BUILTIN_AMPLITUDES, rot
 from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 L, W = 1.0, 0.1
 P = (L, W / 2, W / 2)                       # the end face's centre: the twist axis passes through it
 

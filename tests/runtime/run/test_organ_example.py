@@ -14,7 +14,7 @@ from tensormass.runtime.mesh.regions import region_faces, region_nodes
 from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
-ORGAN = Path(__file__).resolve().parents[2] / "examples" / "organ"
+ORGAN = Path(__file__).resolve().parents[3] / "examples" / "organ"
 A, B, C = 0.040, 0.030, 0.030
 
 
