@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cutting import check_model, removed, separated
+from ..base import integrator_kinds
 from ..mesh.regions import box_tolerance, region_cell_masks
 from ..mesh.topology import (TopologyError, _cell_nodes, box_cells, check_topology, incidence, plane_pairs,
     refine_hexahedra, removal, separate)
@@ -92,7 +93,7 @@ class TopologyEvents:
     def _plan(self, model) -> None:
         mesh, solver = model.mesh, model.solver
         for i, e in enumerate(self.events):
-            if e.kind == "refine" and solver.kind in ("explicit", "generalized_alpha"):
+            if e.kind == "refine" and not integrator_kinds.get(solver.kind).hanging_nodes:
                 raise TopologyError(f"{_key(e, i)}: splitting hexahedra leaves hanging nodes, which need "
                                     f"solver.kind implicit_euler, backward_euler or static (not {solver.kind!r})")
             if e.criterion is not None:
@@ -255,7 +256,7 @@ class TopologyEvents:
             for x in (u, v):
                 x.reshape(-1, dpn)[gone.orphans] = 0.0
             counts = {"cells_removed": int(gone.removed.size), "nodes_orphaned": int(gone.orphans.size)}
-        if model.solver.kind == "static":
+        if not integrator_kinds.get(model.solver.kind).dynamic:
             _refuse_floating(new, _label(e, i), step)
         done = time.perf_counter()
         rule = {} if e.criterion is None else {"criterion": e.criterion, "threshold": e.threshold}

@@ -18,6 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..base import integrator_kinds
 from ..base.errors import TensormassError
 
 __all__ = ["RIGID_MODES", "ZERO_EIGENVALUE", "UNIQUE_TOLERANCE", "spurious_modes", "hourglass_message", "check_static"]
@@ -72,7 +73,7 @@ def check_static(ctx) -> None:
     meshes clamped along an edge), the static answer is unique and the run goes on (the advice still
     names the element)."""
     model = ctx.model
-    if model.solver.kind != "static":
+    if integrator_kinds.get(model.solver.kind).dynamic:
         return
     backend = getattr(model.solver, "backend", "numba")
     deficient = {}

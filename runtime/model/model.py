@@ -25,6 +25,7 @@ from ..kernels import kernels as _kernels
 from ..scene import resources
 from ..base.dofs import dofs_per_node as _dofs_per_node
 from ..base.dofs import node_dofs, split_nodal
+from ..base import integrator_kinds
 from ..base.errors import ElementError, TensormassError
 from ..assembly import loads as _loads
 from ..physics.integrators import outputs_for
@@ -416,7 +417,7 @@ class Model:
             return None
         from ..physics.hanging import HangingNodes
         hanging = HangingNodes.of(self.mesh, self.dofs_per_node, self.fixed_dofs)
-        if hanging is not None and self.solver.kind in ("explicit", "generalized_alpha"):
+        if hanging is not None and not integrator_kinds.get(self.solver.kind).hanging_nodes:
             raise TensormassError(f"solver.kind = {self.solver.kind!r}: a mesh with hanging nodes (hexahedra "
                                   "refined 1:8 next to whole ones) needs implicit_euler, backward_euler or static "
                                   "(its mass is not diagonal on the constrained dofs)")
@@ -496,7 +497,7 @@ class Model:
                 where = f"in region {load.region!r}" if getattr(load, "region", None) is not None else f"inside box {load.box!r}"
                 raise TensormassError(f"loads.pressure[{i}]: no boundary face {where}")
             amplitude = getattr(load, "amplitude", None)
-            if amplitude is not None and self.solver.kind == "static":
+            if amplitude is not None and not integrator_kinds.get(self.solver.kind).dynamic:
                 raise TensormassError(f"loads.pressure[{i}].amplitude: a static run ramps its pressures with the load "
                                       "factor; amplitudes over time need a dynamic solver.kind")
             loads.append((faces, value, amplitude))

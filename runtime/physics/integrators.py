@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from ..base.integrator_kinds import KINDS
 from ..base.errors import InvertedElementError, TensormassError
 from .health import safe_norm
 from .newton import Context, IncrementalPotential, Potential, newton
@@ -59,7 +60,7 @@ class _Integrator:
 class Static(_Integrator):
     """Load stepping with Newton + line search on Pi(u) = W(u) - lambda f_ext.u."""
     kind = "static"
-    outputs = ("energy", "forces", "stiffness")
+    outputs = KINDS["static"].outputs       # runtime.base.integrator_kinds
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -130,7 +131,7 @@ class ImplicitEuler(_Dynamic):
     (M + h D + h^2 K) dv = h (f(x, v) - h K v),  f = f_int + f_ext - D v,  D = alpha M + beta K.
     """
     kind = "implicit_euler"
-    outputs = ("energy", "forces", "stiffness")
+    outputs = KINDS["implicit_euler"].outputs       # runtime.base.integrator_kinds
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -160,7 +161,7 @@ class ImplicitEuler(_Dynamic):
 class BackwardEuler(_Dynamic):
     """Fully implicit Euler: Newton on the incremental potential (see IncrementalPotential)."""
     kind = "backward_euler"
-    outputs = ("energy", "forces", "stiffness")
+    outputs = KINDS["backward_euler"].outputs       # runtime.base.integrator_kinds
 
     def single(self, u, v, t, h):
         ctx = self.ctx
@@ -177,7 +178,7 @@ class BackwardEuler(_Dynamic):
 class Explicit(_Dynamic):
     """Symplectic Euler: v += h M^-1 f(x, v); x += h v.  Stops when it detects instability."""
     kind = "explicit"
-    outputs = ("forces", "energy")            # energy every few steps only (health monitor, reports)
+    outputs = KINDS["explicit"].outputs       # runtime.base.integrator_kinds
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -374,7 +375,7 @@ class _AlphaPotential(Potential):
 class GeneralizedAlpha(_Dynamic):
     """Generalized-alpha (see the module docstring); rho_inf = 1: energy-conserving trapezoidal rule."""
     kind = "generalized_alpha"
-    outputs = ("energy", "forces", "stiffness")
+    outputs = KINDS["generalized_alpha"].outputs       # runtime.base.integrator_kinds
 
     def __init__(self, ctx):
         super().__init__(ctx)

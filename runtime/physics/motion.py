@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base import integrator_kinds
 from ..base.errors import SceneError, TensormassError
 
 __all__ = ["Amplitude", "Rotation", "Motion", "BUILTIN_AMPLITUDES", "parse_amplitude", "parse_rotation",
@@ -243,7 +244,7 @@ class Motion:
 
     @property
     def static(self) -> bool:
-        return self.model.solver.kind == "static"
+        return not integrator_kinds.get(self.model.solver.kind).dynamic
 
     @property
     def duration(self) -> float:

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..base import integrator_kinds
 from ..base.errors import TensormassError
 from ..mesh.regions import box_contains, selection_nodes
 
@@ -171,7 +172,7 @@ def residual(ctx, integrator) -> np.ndarray:
 def _evaluate(ctx, integrator) -> np.ndarray:
     """M a + D v - f_int - f_ext - f_p at the current state with a = 0."""
     model, u, v = ctx.model, ctx.u, ctx.v
-    static = model.solver.kind == "static"
+    static = not integrator_kinds.get(model.solver.kind).dynamic
     duration = getattr(integrator, "duration", 1.0) or 1.0
     fraction = ctx.t if static else ctx.t / duration
     f = ctx.asm.forces(u) + integrator.external_force(fraction)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..base import parallel as _parallel
 from ..change.adapt import MAX_STATIC_PASSES, Adapter
+from ..base import integrator_kinds
 from ..base.errors import (EXIT_INTERRUPTED, EXIT_OK, EXIT_UNTRUSTED, RunInterrupted, RunStopped,
     TensormassError)
 from ..scene import advice as _advice
@@ -227,7 +228,7 @@ class Simulation:
             ctx.v = self._v0.copy()
         if isinstance(self.integrator, Explicit):
             self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
-        self.monitor = HealthMonitor(ctx, dynamic=model.solver.kind != "static",
+        self.monitor = HealthMonitor(ctx, dynamic=integrator_kinds.get(model.solver.kind).dynamic,
                                      duration=getattr(self.integrator, "duration", None))
         _hourglass.check_static(ctx)          # refused: a static stiffness made singular by hourglass modes
         # the frames' fields can be computed (kernels with stress(), providers): refused before step 1
@@ -349,7 +350,7 @@ class Simulation:
         U[:, :model.dim] += x_new - x
         error = abs(constraint.volume(model.mesh.points + U[:, :model.dim]) / constraint.rest_volume - 1.0)
         self.volume_error = max(getattr(self, "volume_error", 0.0), error)
-        if model.solver.kind != "static":
+        if integrator_kinds.get(model.solver.kind).dynamic:
             self._tangent_velocities(model, constraint, free, x_new)
 
     def _tangent_velocities(self, model, constraint, free, x) -> None:
@@ -382,7 +383,7 @@ class Simulation:
         equilibrium of the adapted model); earlier load steps only pass their switches on
         to the next step, which costs no extra Newton iterations.
         """
-        static = self.model.solver.kind == "static" and k == self.integrator.n_steps
+        static = not integrator_kinds.get(self.model.solver.kind).dynamic and k == self.integrator.n_steps
         for _ in range(MAX_STATIC_PASSES if static else 1):
             change = self.adapter.update(self.ctx, k)
             if change.model is not None:
@@ -449,7 +450,7 @@ class Simulation:
                 elastic = ctx.asm.energy(ctx.u)
             finally:
                 ctx.asm.time = saved
-        kinetic = model.mass_matrix.energy(ctx.v) if model.solver.kind != "static" else None
+        kinetic = model.mass_matrix.energy(ctx.v) if integrator_kinds.get(model.solver.kind).dynamic else None
         with np.errstate(over="ignore", invalid="ignore"):
             # loads with amplitudes: the loads acting now; follower pressure: its work along the path
             work = model.motion.work(ctx.u, ctx.t) + self._pressure_work(model, ctx.u)
@@ -493,7 +494,7 @@ class Simulation:
     def _write(self, step: int, flag):
         if self.writer is None:
             return
-        fields = {} if self.model.solver.kind == "static" else {"velocity": self.velocity}
+        fields = {} if not integrator_kinds.get(self.model.solver.kind).dynamic else {"velocity": self.velocity}
         fields.update(self.model.split_dofs(self.dofs.ravel())[1])      # dofs past the displacement (runtime.base.dofs)
         # only the keywords in use, so simple writers (write_frame(step, t, X, u, fields)) keep working
         extra = {} if flag is None else {"flag": flag}
@@ -535,7 +536,7 @@ class Simulation:
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
             fields=self._fields_summary(), reactions=self._final_reactions(),
-            units=_units(model.dim, model.solver.kind == "static"), advice=list(getattr(self, "advice", [])))
+            units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic), advice=list(getattr(self, "advice", [])))
 
     def _kernel_info(self) -> list:
         """Model.kernel_info with, per part, the colour count of its assembly: segments of one colour

@@ -10,6 +10,7 @@ from ... import laws
 from ...backends import BACKENDS
 from ...generator.catalogue import entries
 from ..base.errors import SceneError
+from ..base import integrator_kinds
 from ..base.paths import scene_path
 from ..mesh.bars import BAR_ELEMENTS
 from ..mesh.container import COORD_MAX
@@ -49,7 +50,7 @@ _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative",
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
 
-SOLVER_KINDS = ("static", "implicit_euler", "backward_euler", "explicit", "generalized_alpha")
+SOLVER_KINDS = integrator_kinds.NAMES
 # The cheapest step there is (explicit, one hexahedron) takes ~35 us on the benchmark
 # machine: 1e8 steps are an hour for a single cell and days for any real mesh (static
 # load steps cost a Newton solve each).  More is a typo (1e12, an extra 000), refused
@@ -220,7 +221,7 @@ class Parser:
         _formulation.check_adapt(materials, adapt)
         name = self.string(data.get("name", "scene"), "name")
         description = self.string(data.get("description", ""), "description")
-        if solver.kind == "static" and not fixed:
+        if not integrator_kinds.get(solver.kind).dynamic and not fixed:
             raise SceneError("fixed: a static scene needs at least one [[fixed]] box "
                              "(without constraints the stiffness matrix is singular)")
         topology = [self.topology_event(t, kind, f"{kind}[{i}]", solver)
@@ -569,7 +570,7 @@ class Parser:
             s.on_inversion = self.string(t["on_inversion"], "solver.on_inversion", INVERSION_ACTIONS)
         if "mass" in t:
             s.mass = self.string(t["mass"], "solver.mass", MASS_KINDS)
-            if s.mass == "consistent" and s.kind == "explicit":
+            if s.mass == "consistent" and not integrator_kinds.get(s.kind).consistent_mass:
                 raise SceneError("solver.mass: 'consistent' needs an implicit solver (implicit_euler, "
                                  "backward_euler, generalized_alpha); explicit integration inverts the lumped (diagonal) mass")
         if "threads" in t:
@@ -579,7 +580,7 @@ class Parser:
             if s.rho_inf > 1.0:
                 raise SceneError(f"solver.rho_inf: must be <= 1 (got {_fmt(s.rho_inf)}); 1 = no numerical damping, "
                                  "0 = the strongest high-frequency damping")
-            if s.kind != "generalized_alpha":
+            if not integrator_kinds.get(s.kind).takes_rho_inf:
                 raise SceneError(f"solver.rho_inf: only used by kind = \"generalized_alpha\" (kind is {s.kind!r})")
         return s
 
@@ -615,7 +616,7 @@ class Parser:
                 raise SceneError(f"{key}.{k}: only used with criterion = \"stretch\" (tearing)")
         event = TopologyEvent(kind=kind, name=self.string(t["name"], f"{key}.name") if "name" in t else None)
         if "time" in t:
-            if solver.kind == "static":
+            if not integrator_kinds.get(solver.kind).dynamic:
                 raise SceneError(f"{key}.time: a static run has load steps, not time; give step = ...")
             event.time = self.number(t["time"], f"{key}.time", min_value=0.0)
             if _event_step(event.time, solver) > solver.steps:

@@ -54,14 +54,18 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 from ... import elements as _elements
 from ... import generated
 from ..solve import pardiso as _pardiso
+from ..base import integrator_kinds
 from ..base.errors import TensormassError
+from ..mesh.solids import LAYERS as BALL_LAYERS
+from .types import Material, Solver
+from ..solve.choices import (AUTO_BAND_WORK_PER_NNZ, AUTO_DIRECT_BELOW, BAND_MAX_ENTRIES, DIRECT_LIMIT,
+                              PARDISO_ANALYSE_ABOVE, PARDISO_FLOPS)
 from ..mesh.bars import bar_counts
 from ..mesh.regions import may_cover, reachable_laws
 
@@ -125,25 +129,15 @@ HISTORY_ROWS = 4096
 HISTORY_ROW_BYTES = 8 * 32 * 2
 HISTORY_BYTES_PER_PROBE = 3 * 32 * 2
 HISTORY_BYTES_PER_FIXED = 6 * 32 * 2
-# runtime.mesh.solids.LAYERS (not imported: a test checks they agree): the ball's layers per cell of its core.
-BALL_LAYERS = 2.0 / 3.0
 # Uniform [[adapt]] refinement (every cell marked, the worst case) per round: cells x 2.0,
 # nodes x 1.6-2.3 measured on tetra and triangle bars.
 REFINE_CELLS, REFINE_NODES = 2.0, 2.5
-# The solver's choices (runtime/solve/solvers.py; not imported: it loads numba, and a scene is
-# refused before that; a test checks these agree).
-AUTO_DIRECT_BELOW = 3_000
-DIRECT_LIMIT = 2_000_000
-PARDISO_ANALYSE_ABOVE = 0.05
-PARDISO_FLOPS = 30e9
 # PARDISO (nested dissection) on 3D bodies, measured (solvers.py's table): factor entries
 # ~12-18 x n^(4/3), factor flops ~1.5e-8 x n^2, ~12 bytes per factor entry (the float32
 # factor plus a float64 one when float32 does not converge).
 PARDISO_FILL = 18.0
 PARDISO_FLOPS_PER_N2 = 1.5e-8
 PARDISO_BYTES = 12
-AUTO_BAND_WORK_PER_NNZ = 6_000.0
-BAND_MAX_ENTRIES = 2 ** 28
 # Time: kernels 0.3-1.1 ns per manifest operation (measured), scatter ~3 ns per entry, the
 # band factor ~3e-11 s x n kd^2 and a CG-IC iteration ~1.5e-9 s x nnz (solvers.py's
 # measurements); CG takes ~100 iterations on dynamic systems (the mass term conditions
@@ -153,16 +147,9 @@ SECONDS_PER_ENTRY = 3e-9
 BAND_SECONDS = 3e-11
 CG_SECONDS = 1.5e-9
 CG_DYNAMIC_ITERATIONS = 100
-NEWTON_ITERATIONS = {"static": 4, "implicit_euler": 2, "backward_euler": 2, "explicit": 1, "generalized_alpha": 2}
-# The kernel output each solver calls per iteration: "stiffness" among an integrator's declared
-# outputs (runtime.physics.integrators, not imported: it loads numba) means forces_and_stiffness; a test
-# checks this table against the declarations.
-_STEP_OUTPUT = {"explicit": "forces"}
-
-# What estimate() assumes when no materials or solver are given: the defaults of a scene's
-# Material and Solver (runtime.scene.scene imports this module, so not imported; a test checks they agree).
-DEFAULT_MATERIAL = SimpleNamespace(region="all", box=None, law="stvk", quadrature="gauss2")
-DEFAULT_SOLVER = SimpleNamespace(kind="static", steps=1, linear="auto", cg_max_iterations=1000, project_psd=None)
+# What estimate() assumes when no materials or solver are given: a scene's defaults.
+DEFAULT_MATERIAL = Material()
+DEFAULT_SOLVER = Solver()
 
 _UNITS = {"": 1, "B": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40, "P": 2 ** 50}
 
@@ -500,7 +487,8 @@ class _Estimator:
     def __init__(self, counts: MeshCounts, materials, solver, adapt):
         self.c, self.solver = counts, solver
         self.kind = solver.kind
-        self.output = _STEP_OUTPUT.get(self.kind, "forces_and_stiffness")
+        self.integrator = integrator_kinds.get(self.kind)
+        self.output = self.integrator.step_output
         dim = counts.dim
         # dofs per node (runtime.base.dofs): the dimension for solids; one count per mesh
         dim = self.dpn = max((_dofs_per_node(t, dim) for t in counts.cells), default=dim)
@@ -528,7 +516,7 @@ class _Estimator:
 
     def _linear(self) -> str:
         """What the linear solver will do: "none", "band", "pardiso" or "cg" (solvers.LinearSolver.choose)."""
-        if self.kind == "explicit":
+        if self.output == "forces":             # no stiffness, no linear solve
             return "none"
         n, method = self.dofs, self.solver.linear
         band_entries = n * (self.kd + 1)
@@ -572,7 +560,7 @@ class _Estimator:
         pattern = blocks_map + NNZ_HELD * self.nnz + 8 * self.cell_ints * (2 + dim)
         # the assembler evaluates blocks of about BLOCK_BYTES per thread, never a whole-part K
         blocks = min(matrices, 2 * _assembly_block_bytes() * _threads())
-        if self.kind == "explicit":          # element forces only; the pattern is still built
+        if self.output == "forces":          # element forces only; the pattern is still built
             step = {"element forces": 2 * 8 * self.cell_ints * dim}
         else:
             step = {"element matrices": blocks * (PROJECTION_BLOCK if self.projection else 1.0),
@@ -597,17 +585,17 @@ class _Estimator:
 
     def _seconds(self) -> float:
         kernel = self.ops * SECONDS_PER_OP
-        if self.kind == "explicit":
+        if self.output == "forces":
             return kernel + SECONDS_PER_ENTRY * self.cell_ints * self.dpn
         if self.linear == "band":
             solve = self._band_seconds()
         elif self.linear == "pardiso":
             solve = self._pardiso_seconds()
         else:
-            iterations = self.solver.cg_max_iterations if self.kind == "static" else CG_DYNAMIC_ITERATIONS
+            iterations = CG_DYNAMIC_ITERATIONS if self.integrator.dynamic else self.solver.cg_max_iterations
             solve = CG_SECONDS * self.nnz * min(iterations, self.solver.cg_max_iterations)
         per_iteration = kernel + SECONDS_PER_ENTRY * self.entries + solve
-        return NEWTON_ITERATIONS.get(self.kind, 3) * per_iteration
+        return self.integrator.newton_iterations * per_iteration
 
 
 # ============================================================================== the check

@@ -13,12 +13,11 @@ from scipy.linalg import lapack
 from threadpoolctl import ThreadpoolController
 
 from .cg import REFINE_MAX, refine, reuse_iterations
+from .choices import BAND_MAX_ENTRIES
 
 __all__ = ["BandPlan", "BandFactor", "band_solve", "band_costs", "reuse_cap", "band_ordering",
            "one_blas_thread", "BAND_MAX_ENTRIES"]
 
-# The band factor is refused (SuperLU instead) beyond this many float64 band entries (2 GiB).
-BAND_MAX_ENTRIES = 2**28
 # Cost model of the band path: modelled seconds on the benchmark machine (2-core EPYC,
 # 32 MiB L3, one BLAS thread, float32 factor).  It replaces the measured seconds the reuse
 # cap used to come from: those made the decision, and so the bits of the result, depend on

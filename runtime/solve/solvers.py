@@ -43,6 +43,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import amg, pardiso
+from .choices import (AUTO_BAND_WORK_PER_NNZ, AUTO_DIRECT_BELOW, DIRECT_LIMIT, PARDISO_ANALYSE_ABOVE,
+                      PARDISO_FLOPS)
 from .band import (BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_solve, one_blas_thread,
     reuse_cap)
 from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
@@ -74,9 +76,6 @@ PRECONDITIONERS = ("ic", "jacobi", "amg")
 # its solve streams the factor: ~2.2e-9 s per factor entry (single), its analysis (nested
 # dissection, once per pattern) ~1.6e-7 s per stored entry.  Multigrid-CG (pyamg, rigid-body
 # modes): setup ~4e-7 s and ~2.5e-8 s per iteration per stored entry, ~40 iterations.
-AUTO_DIRECT_BELOW = 3_000            # below this many unknowns: the band Cholesky, no model needed
-PARDISO_ANALYSE_ABOVE = 0.05         # modelled band seconds past which PARDISO's analysis is worth running
-PARDISO_FLOPS = 30e9                 # single-precision factor rate (double: half)
 PARDISO_OVERHEAD = 2e-3
 PARDISO_SOLVE_PER_ENTRY = 2.2e-9     # per factor entry, single precision (double: 1.5x)
 PARDISO_MAX_BYTES = 8 * 2**30        # "auto" takes multigrid past this factor memory
@@ -87,11 +86,6 @@ PARDISO_MAX_BYTES = 8 * 2**30        # "auto" takes multigrid past this factor m
 # 2026.2 on an implicit Euler matrix).  Bits do not depend on it (MKL's reproducible mode).
 PARDISO_PARALLEL_DOFS = 15_000
 AMG_SECONDS_PER_NNZ = 4e-7 + 40 * 2.5e-8
-# Without MKL: "auto" takes the band Cholesky while n kd^2 <= AUTO_BAND_WORK_PER_NNZ x nnz,
-# IC(0)-CG beyond (the rule of session 3: CG-IC(0) costs about nnz x 1.2-1.7e-7 s).
-AUTO_BAND_WORK_PER_NNZ = 6_000.0
-# Above this many unknowns "auto" never factorises.
-DIRECT_LIMIT = 2_000_000
 # An AMG hierarchy is reused on later matrices of the pattern until CG needs more than this
 # many times the iterations it took when it was built (plus a margin): then it is rebuilt.
 AMG_REBUILD_RATIO = 2.0

@@ -4,17 +4,18 @@ validated once."""
 import numpy as np
 import pytest
 
+from tensormass.runtime.base import integrator_kinds
+
 from tensormass import laws
 from tensormass.laws import base as laws_base
 from tensormass.runtime.physics import integrators
-from tensormass.runtime.scene import resources
 from tensormass.runtime.base.errors import SceneError, TensormassError
 from tensormass.runtime.mesh.container import CellBlock, Mesh
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model, assign_materials as model_assign
 from tensormass.runtime.mesh.regions import (BOX_TOLERANCE, assign_materials, box_bounds, box_contains,
     box_tolerance, check_unused_materials, material_groups, prescribed_values, reachable_laws, region_mask)
-from tensormass.runtime.scene.types import Adapt, Fixed, Material, Solver
+from tensormass.runtime.scene.types import Adapt, Fixed, Material
 from tensormass.runtime.scene.scene import Scene
 
 
@@ -180,19 +181,17 @@ def test_each_integrator_declares_exactly_the_outputs_the_model_loads(kind, monk
                 monkeypatch.setattr(part.kernel, name, lambda D, u, _n=name: called.append(_n))
     model.warm_up()
     assert tuple(called) == declared
-    # resources' cost model (not importing the integrators) agrees with the declarations
-    step = resources._STEP_OUTPUT.get(kind, "forces_and_stiffness")
-    assert step == ("forces_and_stiffness" if "stiffness" in declared else "forces")
+    # the light declaration (what the scene parser and the resource estimate read) is the integrator's
+    assert integrator_kinds.get(kind).outputs == declared
+    assert integrator_kinds.get(kind).step_output == ("forces_and_stiffness" if "stiffness" in declared else "forces")
     with pytest.raises(TensormassError, match="unknown solver kind 'leapfrog'"):
         integrators.outputs_for("leapfrog")
 
 
-def test_resources_defaults_are_the_scene_defaults():
-    mat, solver = Material(), Solver()
-    for k, v in vars(resources.DEFAULT_MATERIAL).items():
-        assert getattr(mat, k) == v, k
-    for k, v in vars(resources.DEFAULT_SOLVER).items():
-        assert getattr(solver, k) == v, k
+def test_every_declared_kind_has_its_integrator():
+    assert set(integrator_kinds.NAMES) == set(integrators._KINDS)
+    for name, kind in integrator_kinds.KINDS.items():
+        assert integrators.integrator_class(name).kind == name and kind.dynamic == (name != "static")
 
 
 # ------------------------------------------------------------------------------ E and nu once

@@ -8,9 +8,10 @@ import json
 import numpy as np
 import pytest
 
+from tensormass.runtime.base import integrator_kinds
+
 from tensormass.apps.cli import main
 from tensormass.runtime.physics import integrators
-from tensormass.runtime.scene import resources
 from tensormass.runtime.assembly.assembly import assemble
 from tensormass.runtime.base.errors import SceneError, TensormassError
 from tensormass.runtime.physics.newton import Context
@@ -242,8 +243,8 @@ def test_prescribed_displacement_moves_the_boundary_on_the_ramp():
 def test_kind_declares_its_outputs_and_cost():
     assert integrators.integrator_class("generalized_alpha") is GeneralizedAlpha
     assert integrators.outputs_for("generalized_alpha") == ("energy", "forces", "stiffness")
-    assert resources._STEP_OUTPUT.get("generalized_alpha", "forces_and_stiffness") == "forces_and_stiffness"
-    assert "generalized_alpha" in resources.NEWTON_ITERATIONS
+    declared = integrator_kinds.get("generalized_alpha")
+    assert declared.step_output == "forces_and_stiffness" and declared.newton_iterations >= 1 and declared.takes_rho_inf
 
 
 SOLVER = '[solver]\nkind = "{kind}"\ndt = 0.01\nsteps = 3\n{extra}'
