@@ -20,10 +20,15 @@ import sys
 import time
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..runtime.base.errors import RunInterrupted, RunStopped, TensormassError
-from ..runtime.scene.scene import Scene
-from ..runtime.scene.parser import picture_field
+
+# Scene (runtime.scene, which reads the laws: sympy, numpy) is imported inside cmd_run and cmd_demo:
+# measured with `python -X importtime`, 2 shared cores, ~2.2 s that `tensormass --help` and
+# `tensormass run --help` skip.
+if TYPE_CHECKING:
+    from ..runtime.scene.scene import Scene
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
            "DEMO_OUT", "print_advice"]
@@ -134,7 +139,7 @@ def _simulate(Simulation, scene, files, progress, advise=None):
     the files dropped a folder made for nothing."""
     sim = None
     try:
-        sim = Simulation(scene, progress=progress, writer=files.writer)
+        sim = Simulation(scene, progress=progress, writer=files.writer, checks=[files.check_outputs])
         if advise is not None:               # the advice the Simulation computed, before its first step
             advise(sim)
         summary, stopped = sim.run(), None
@@ -337,6 +342,9 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
             rows.append((key, str(o[key])))
     if (o or {}).get("picture_skipped"):
         rows.append(("picture", f"not drawn: {o['picture_skipped']}"))
+    for key in ("picture", "plot"):          # optional files that failed after the run: exit code 0
+        if (o or {}).get(f"{key}_error"):
+            rows.append((key, f"not written (warning): {o[f'{key}_error']}"))
     width = max(len(r[0]) for r in rows)
     for key, value in rows:
         print(f"{key:<{width}}  {value}", file=out)
@@ -346,6 +354,8 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
 
 
 def cmd_run(args) -> int:
+    from ..runtime.scene.parser import picture_field
+    from ..runtime.scene.scene import Scene
     scene = Scene.from_toml(args.scene, max_memory=getattr(args, "max_memory", None))
     if getattr(args, "threads", None) is not None:       # --threads overrides [solver] threads
         from ..runtime.base.parallel import parse_threads
@@ -379,6 +389,7 @@ def euler_bernoulli_tip(scene: Scene) -> tuple:
 
 
 def cmd_demo(args) -> int:
+    from ..runtime.scene.scene import Scene
     scene = Scene.from_string(demo_text(), name="demo", source="tensormass demo (apps/demo.toml)",
                               max_memory=getattr(args, "max_memory", None))
     out = Path(args.out or DEMO_OUT)

@@ -17,17 +17,27 @@ A run that ends before its first frame leaves no folder behind. The folder is lo
 first frame until the summary is written (runtime.run.lock.FolderLock): a second run into the
 same folder meanwhile is refused, naming the first one's pid.
 
-Everything that can be refused is refused in prepare(), before the model is built: an unwritable
+Everything that can be refused is refused before the first step: in prepare(), before the model is built, an unwritable
 folder, frames or a .pvd that an earlier run of ours did not write, a summary path that holds
 anything but one of our summaries, a history/picture file in a folder whose summary.json is not
 ours (all unless overwrite), a picture or plot asked without an output folder, a folder another
 run is writing into, and two files of this run at one path (--json s.csv would be its own
-history, --json onto the folder's history or a picture).
+history, --json onto the folder's history or a picture); in check_outputs(sim), once the model
+is built (Simulation calls it before its first step), a picture field the kernels cannot give and
+a mesh the picture cannot draw (a picture of the rest state is rendered, not written).
+
+The picture and the plot are optional: when one of them cannot be written after a run that
+reached its end (a mesh changed by a cut, a full disk), the run keeps its exit code 0; the
+summary has a warning of kind "output" naming the file and the reason (and "picture_error" /
+"plot_error" in its "output"), and its status is "warnings". Exit code 2 means bad input found
+before the first step, never a late failure of an optional file.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
+
+import numpy as np
 
 from ..base.errors import EXIT_OK, TensormassError
 from .curves import plot_history
@@ -64,7 +74,6 @@ class RunFiles:
         self.plot = scene.output.plot
         self.data = None
         self._prepared = False
-        self._late_error = None
 
     def prepare(self) -> None:
         """Every check before the run (idempotent); writes nothing."""
@@ -84,6 +93,26 @@ class RunFiles:
                 self._check_folder_summary()
                 self._check_folder_extras()
         self._prepared = True
+
+    def check_outputs(self, sim) -> None:
+        """The checks that need the model (Simulation calls this before its first step; writes
+        nothing): the picture's field is one the kernels give, and the mesh is one the picture
+        module can draw (runtime.run.picture.render_picture of the rest state, kept in memory)."""
+        if not self.picture:
+            return
+        field = self.picture
+        try:
+            if field not in ("displacement", "u"):
+                from ..physics.fields import check_available
+                check_available(sim.model, [field], sim._field_providers())
+            from .picture import render_picture
+            mesh = sim.model.mesh
+            render_picture(mesh, mesh.points, np.zeros_like(mesh.points), None, "displacement", unit="m",
+                           size=(160, 120))
+        except TensormassError as exc:
+            hint = "" if field == "displacement" else " (a picture of the displacement: --picture displacement)"
+            raise TensormassError(f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused before the "
+                                  f"first step: {exc}{hint}") from None
 
     @property
     def picture_path(self):
@@ -175,23 +204,21 @@ class RunFiles:
                 writer.discard()
         self.data = data = self.summary_data(summary, stopped)
         if data["output"] is not None and writer.frames:
+            # the optional files first, so that the summary says which of them failed and why
             data["output"].update(self._pictures(data, stopped, sim))
+            data["output"].update(self._plot(data))
         for path in self._summary_paths():
             write_summary(path, data)
             if data.get("per_step"):
                 write_history_csv(path.with_suffix(".csv"), data["per_step"], data.get("units") or {})
-        if data["output"] is not None and data["output"].get("plot"):
-            plot_history(data, data["output"]["plot"])
         if self.json_path is not None:
             data["output_json"] = str(self.json_path)
-        if self._late_error is not None:
-            raise self._late_error
         return data
 
     def _pictures(self, data, stopped, sim) -> dict:
-        """The picture and plot entries of data["output"] (paths; the picture drawn here)."""
-        out = {"plot": str(self.plot_path) if self.plot and data.get("per_step") else None,
-               "picture": None}
+        """The picture entries of data["output"] (its path; the picture drawn here). A picture that
+        cannot be drawn after the run is a warning (_optional_failed), not an error."""
+        out = {"picture": None}
         if not self.picture:
             return out
         if stopped is not None or sim is None:
@@ -202,12 +229,23 @@ class RunFiles:
         path = self.picture_path
         try:
             picture_of_simulation(sim, path, self.picture, step=sim.step, time=sim.time)
-        except TensormassError as exc:           # the summary is still written; the error raised after it
-            out["picture_error"] = str(exc)
-            self._late_error = exc
+        except (TensormassError, OSError) as exc:
+            out["picture_error"] = _optional_failed(data, "picture", path, exc)
             return out
         out["picture"] = str(path)
         return out
+
+    def _plot(self, data) -> dict:
+        """The plot entries of data["output"]: the history curves drawn (runtime.run.curves), or the
+        warning saying why not."""
+        if not self.plot or not data.get("per_step"):
+            return {"plot": None}
+        path = self.plot_path
+        try:
+            plot_history(data, path)
+        except (TensormassError, OSError) as exc:
+            return {"plot": None, "plot_error": _optional_failed(data, "plot", path, exc)}
+        return {"plot": str(path)}
 
     def _summary_paths(self) -> list:
         """The folder's summary (when the folder holds frames of this run) and --json's, once each."""
@@ -239,6 +277,17 @@ class RunFiles:
             "frames": len(writer.frames), "every": scene.output.every, "dir_from": self.dir_from,
             "summary": str(self.summary_path) if writer.frames else None}
         return data
+
+
+def _optional_failed(data, what, path, exc) -> str:
+    """Record an optional file that could not be written after the run: a warning of kind "output"
+    in the summary (the status "ok" becomes "warnings"; the exit code stays 0); returns the reason."""
+    reason = f"{what} {path} not written: {exc}"
+    data.setdefault("warnings", []).append({"step": data.get("steps_done"), "time": None, "kind": "output",
+                                            "message": reason})
+    if data.get("status") == "ok":
+        data["status"] = "warnings"
+    return reason
 
 
 def _steps_done(summary) -> int:

@@ -117,12 +117,14 @@ class Simulation:
 
     progress(step, n_steps) is called after every step; on_step(sim) too, after it:
     between steps the live state is readable (sim.step, sim.time, sim.displacement,
-    sim.velocity, sim.dofs) for coupling with a viewer or a haptic loop.
+    sim.velocity, sim.dofs, sim.probes()) for coupling with a viewer or a haptic loop.
+    checks: callables check(sim) run once the model is built, before the first step (the command
+    line passes its RunFiles.check_outputs; a scene's own RunFiles is checked without it).
     u0 / v0: optional initial displacement and velocity ((n_points, dim) or flat).
     """
 
     def __init__(self, scene_or_model, progress=None, writer=None, u0=None, v0=None, *,
-                 output=None, json=None, overwrite: bool = False, on_step=None):
+                 output=None, json=None, overwrite: bool = False, on_step=None, checks=()):
         start = time.perf_counter()
         self.files = None
         if isinstance(scene_or_model, Model):
@@ -159,6 +161,8 @@ class Simulation:
         self.stable_dt = None
         self.summary = None
         self._evaluator = None                   # runtime.physics.fields.FieldEvaluator of the current model
+        # checks(sim) of the outputs that need the model, before the first step (RunFiles.check_outputs)
+        self._checks = ([self.files.check_outputs] if self.files is not None else []) + list(checks)
 
     def _initial(self, x):
         if x is None:
@@ -233,6 +237,8 @@ class Simulation:
         _hourglass.check_static(ctx)          # refused: a static stiffness made singular by hourglass modes
         # the frames' fields can be computed (kernels with stress(), providers): refused before step 1
         _fields.check_available(model, self._frame_fields(), self._field_providers())
+        for check in self._checks:           # the pictures asked for can be drawn: refused before step 1
+            check(self)
         ctx.asm.time = ctx.linear.time = 0.0         # stepping costs only from here on
 
     def run(self) -> Summary:

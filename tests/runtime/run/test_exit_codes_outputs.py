@@ -1,0 +1,161 @@
+"""Exit code 2 means bad input found before the first step: every output kind of a run that reached
+its end (frames, summary, history, picture, plot) either is written or is refused before step 1, and
+an optional file (picture, plot) that fails after the run is a warning with exit code 0."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tensormass.apps.cli import main
+
+BAR = """
+name = "bar"
+[mesh]
+generate = "bar"
+size = [1.0, 0.2, 0.2]
+cells = [2, 1, 1]
+element = "hexahedron"
+[[material]]
+law = "stvk"
+quadrature = "gauss2"
+E = 1.0e6
+nu = 0.3
+density = 800.0
+[[fixed]]
+box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[solver]
+kind = "static"
+steps = 2
+[[probe]]
+name = "tip"
+point = [1.0, 0.1, 0.1]
+"""
+
+PLATE = """
+name = "plate"
+[mesh]
+generate = "plate"
+size = [1.0, 1.0]
+cells = [2, 2]
+[[material]]
+law = "cst_dkt"
+E = 1.0e7
+nu = 0.3
+thickness = 0.01
+corotational = 0
+density = 1000.0
+[[fixed]]
+box = [[-1, -1, -1], [1e-9, 2, 1]]
+[[loads.pressure]]
+box = [[-1, -1, -1], [2, 2, 1]]
+value = 1.0
+[solver]
+kind = "static"
+steps = 1
+backend = "c"
+[[probe]]
+name = "corner"
+point = [1.0, 1.0, 0.0]
+"""
+
+SCENES = {"bar": BAR, "shell": PLATE}
+
+
+def _scene(tmp_path, kind):
+    path = tmp_path / f"{kind}.toml"
+    path.write_text(SCENES[kind])
+    return path
+
+
+def _run(tmp_path, kind, *extra):
+    out = tmp_path / "out"
+    rc = main(["run", str(_scene(tmp_path, kind)), "--out", str(out), "--quiet", *extra])
+    return rc, out
+
+
+@pytest.mark.parametrize("kind", ["bar", "shell"])
+def test_frames_summary_and_history_of_a_finished_run_exit_0(tmp_path, kind):
+    rc, out = _run(tmp_path, kind)
+    assert rc == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert "frame.pvd" in names and "frame_000000.vtu" in names
+    assert "summary.json" in names and "summary.csv" in names
+    data = json.loads((out / "summary.json").read_text())
+    assert data["exit_code"] == 0 and data["status"] == "ok"
+    assert (out / "summary.csv").read_text().splitlines()[0].startswith("step")
+
+
+@pytest.mark.parametrize("kind", ["bar", "shell"])
+@pytest.mark.parametrize("field", ["", "displacement"])
+def test_a_picture_is_drawn_or_refused_before_the_first_step(tmp_path, kind, field, capsys):
+    rc, out = _run(tmp_path, kind, "--picture", *([field] if field else []))
+    err = capsys.readouterr().err
+    if rc == 2:                          # refused: before anything was written, naming why
+        assert not out.exists()
+        assert "refused before the first step" in err
+    else:
+        assert rc == 0, err
+        data = json.loads((out / "summary.json").read_text())
+        assert data["output"]["picture"] and (out / f"{field or 'von_mises'}.png").is_file()
+    if kind == "bar":                    # a solid's picture always works
+        assert rc == 0
+
+
+@pytest.mark.parametrize("kind", ["bar", "shell"])
+def test_plot_of_a_finished_run_exit_0(tmp_path, kind):
+    rc, out = _run(tmp_path, kind, "--plot")
+    assert rc == 0
+    assert (out / "summary.png").is_file()
+    assert json.loads((out / "summary.json").read_text())["output"]["plot"] == str(out / "summary.png")
+
+
+def _fail(*args, **kwargs):
+    raise OSError(28, "No space left on device")
+
+
+@pytest.mark.parametrize("kind", ["bar", "shell"])
+def test_a_plot_that_fails_after_the_run_is_a_warning_with_exit_0(tmp_path, kind, monkeypatch, capsys):
+    from tensormass.runtime.run import run_files
+    monkeypatch.setattr(run_files, "plot_history", _fail)
+    rc, out = _run(tmp_path, kind, "--plot")
+    assert rc == 0
+    data = json.loads((out / "summary.json").read_text())
+    assert data["status"] == "warnings" and data["exit_code"] == 0
+    assert "No space left on device" in data["output"]["plot_error"]
+    assert [w["kind"] for w in data["warnings"]] == ["output"]
+    assert "summary.png not written: " in data["warnings"][0]["message"]
+
+
+def test_a_picture_that_fails_after_the_run_is_a_warning_with_exit_0(tmp_path, monkeypatch, capsys):
+    from tensormass.runtime.run import picture
+    monkeypatch.setattr(picture, "picture_of_simulation", _fail)
+    rc, out = _run(tmp_path, "bar", "--picture", "displacement")
+    assert rc == 0
+    data = json.loads((out / "summary.json").read_text())
+    assert data["status"] == "warnings" and data["output"]["picture"] is None
+    assert "displacement.png not written: " in data["output"]["picture_error"]
+    assert "No space left on device" in data["warnings"][0]["message"]
+
+
+def test_the_python_api_refuses_an_undrawable_picture_before_writing(tmp_path):
+    import tensormass as tm
+    from tensormass.runtime.base.errors import TensormassError
+    scene = tm.Scene.from_toml(_scene(tmp_path, "bar"))
+    scene.output.picture = "von_mises"
+    from tensormass.runtime.run import picture
+    calls = []
+
+    def refuse(*args, **kwargs):
+        calls.append(args)
+        raise TensormassError("picture: cannot draw this")
+    original = picture.render_picture
+    picture.render_picture = refuse
+    try:
+        with pytest.raises(TensormassError, match="refused before the first step: picture: cannot draw this"):
+            tm.Simulation(scene, output=tmp_path / "api").run()
+    finally:
+        picture.render_picture = original
+    assert calls and not (tmp_path / "api").exists()
