@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import filecmp
+import importlib
 import importlib.util
 import json
 import os
@@ -30,23 +31,28 @@ import time
 import traceback
 from pathlib import Path
 
-import numpy as np
-
-from .. import generated, laws
+from .. import generated
 from ..backends import BACKENDS
 from ..generator import GENERATOR_VERSION
-from ..generator.catalogue import catalogue_laws, entries
-from ..generator.elements import ELEMENTS, element
-from ..generator.pipeline import generate_all
-from ..generator import shape_tables, volumetric
 from ..runtime.base.errors import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped, TensormassError
 from ..runtime.base.files import check_writable
-from .batch import add_batch_command
-from .bench import add_bench_command
 from .commands import add_commands
-from .plot import add_plot_command
-from .reports import add_report_command
 
+# The commands whose modules import sympy, numba or the runtime at the top. Each one's parser is
+# built only when the command line names it (or in full for the docs: build_parser()); otherwise a
+# stub with the same help lists it, so `tensormass --help` and `tensormass run` start without them.
+# Measured with `python -X importtime`, 2 shared cores: generate (generator, sympy) ~1.9 s,
+# bench (numba, kernels, runtime) ~3.3 s, report ~3.4 s, batch ~0.5 s, plot ~0.4 s.
+# name -> (module, function that adds its parser, help)
+DEFERRED = {
+    "generate": (".cli", "add_generate_command", "generate element x law x quadrature kernels"),
+    "batch": (".batch", "add_batch_command",
+              "run scene files x parameter variations as independent tasks (dask.distributed) into one table"),
+    "bench": (".bench", "add_bench_command", "benchmark the kernels (speed, compile budget)"),
+    "report": (".reports", "add_report_command",
+               "accuracy against run time; stability on stiff and extreme cases"),
+    "plot": (".plot", "add_plot_command", "draw the per-step history of a run summary (JSON) as a PNG"),
+}
 
 def committed_dir() -> Path:
     """The generated/ folder of this installation (the committed catalogue)."""
@@ -62,6 +68,8 @@ def _names(values, known, kind):
 
 
 def cmd_list(args) -> int:
+    from .. import laws                    # sympy (~1.4 s): only for the list of law names
+    from ..generator.elements import ELEMENTS
     manifest = json.loads((committed_dir() / "manifest.json").read_text())["entries"]
     rows = [("entry", "points", "constants", "ops energy", "ops forces", "ops f+K", "backends")]
     for key, r in manifest.items():
@@ -75,6 +83,10 @@ def cmd_list(args) -> int:
 
 
 def cmd_generate(args) -> int:
+    from ..generator import shape_tables, volumetric             # sympy, jinja2: ~1.9 s, generate only
+    from ..generator.catalogue import catalogue_laws, entries
+    from ..generator.elements import ELEMENTS
+    from ..generator.pipeline import generate_all
     # no --law: the whole catalogue, the formulations' volume-measure kernels too
     selected = entries(_names(args.element, ELEMENTS, "element"),
                        _names(args.law, catalogue_laws(), "law") or catalogue_laws(),
@@ -106,6 +118,8 @@ def _output_folder(path) -> Path:
 
 def check(selected, backends) -> int:
     """Regenerate into a temporary folder and compare byte for byte with generated/."""
+    from ..generator import shape_tables, volumetric             # sympy, jinja2: ~1.9 s, generate only
+    from ..generator.pipeline import generate_all
     committed = committed_dir()
     with tempfile.TemporaryDirectory() as tmp:
         generate_all(selected, backends, Path(tmp))
@@ -136,6 +150,8 @@ def check(selected, backends) -> int:
 
 def report_numba_compile_times(selected, out: Path) -> None:
     """Import each generated numba module from `out` and time the first call of every kernel."""
+    import numpy as np                     # with the generator: generate only
+    from ..generator.elements import element
     slowest = (0.0, "")
     for entry in selected:
         path = out / "numba" / f"{entry.name}.py"
@@ -161,15 +177,11 @@ def report_numba_compile_times(selected, out: Path) -> None:
         print(f"slowest numba compile: {slowest[1]} {slowest[0]:.2f} s")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="tensormass", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--version", action="version", version=f"tensormass {GENERATOR_VERSION}")
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    p = sub.add_parser("list", help="list the kernel catalogue with op and constant counts")
-    p.set_defaults(run=cmd_list)
-
-    p = sub.add_parser("generate", help="generate element x law x quadrature kernels")
+def add_generate_command(subparsers) -> None:
+    """Add `generate` (its help lists the elements and laws: the generator, with sympy, is imported)."""
+    from ..generator.catalogue import catalogue_laws
+    from ..generator.elements import ELEMENTS
+    p = subparsers.add_parser("generate", help=DEFERRED["generate"][2])
     p.add_argument("--element", nargs="+", help=f"element(s) or all: {', '.join(ELEMENTS)}")
     p.add_argument("--law", nargs="+", help=f"law(s), volume measure(s) or all (the default): {', '.join(catalogue_laws())}")
     p.add_argument("--quadrature", nargs="+", help="quadrature(s) or all: gauss1 gauss2 gauss3 exact")
@@ -182,18 +194,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-compile", action="store_true", help="skip timing numba's first-call compilation")
     p.set_defaults(run=cmd_generate)
 
+
+def build_parser(full=None) -> argparse.ArgumentParser:
+    """The whole command line. full: the names of DEFERRED commands to build in full (None: all of
+    them, as the docs need); the others are stubs with their help only (see DEFERRED)."""
+    parser = argparse.ArgumentParser(prog="tensormass", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version", version=f"tensormass {GENERATOR_VERSION}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("list", help="list the kernel catalogue with op and constant counts")
+    p.set_defaults(run=cmd_list)
+    # the order of `tensormass --help`: generate, run, demo, batch, bench, report, plot
+    _add_deferred(sub, "generate", full)
     add_commands(sub)                      # run, demo
-    add_batch_command(sub)                 # batch: scenes x variations on dask.distributed
-    add_bench_command(sub)                 # bench kernels, bench compile, bench steps
-    add_report_command(sub)                # report accuracy, report stability
-    add_plot_command(sub)                  # plot SUMMARY.json: history curves
+    for name in ("batch", "bench", "report", "plot"):
+        _add_deferred(sub, name, full)     # batch: dask; bench: kernels, compile, steps, ...; report; plot
     return parser
+
+
+def _add_deferred(sub, name: str, full) -> None:
+    module, adder, help_text = DEFERRED[name]
+    if full is None or name in full:
+        getattr(importlib.import_module(module, __package__), adder)(sub)
+    else:
+        sub.add_parser(name, help=help_text, add_help=False)
+
+
+def named_command(argv) -> str | None:
+    """The command an argument list names: its first word that is not an option (the top-level
+    parser has only --help and --version, neither takes a value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
 
 
 def main(argv=None) -> int:
     """Run one command and turn every way it can end into an exit code and one line on stderr."""
     try:
-        args = build_parser().parse_args(argv)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(full={named_command(argv)}).parse_args(argv)
         return args.run(args)
     except KeyboardInterrupt:
         return _say("interrupted", EXIT_INTERRUPTED)
