@@ -139,7 +139,9 @@ def _simulate(Simulation, scene, files, progress, advise=None):
     the files dropped a folder made for nothing."""
     sim = None
     try:
-        sim = Simulation(scene, progress=progress, writer=files.writer, checks=[files.check_outputs])
+        # the outputs that need the model (a picture's field and mesh) are checked before step 1
+        checks = {"checks": [files.check_outputs]} if files.picture else {}
+        sim = Simulation(scene, progress=progress, writer=files.writer, **checks)
         if advise is not None:               # the advice the Simulation computed, before its first step
             advise(sim)
         summary, stopped = sim.run(), None
