@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from ..runtime.scene.scene import Scene
 
 __all__ = ["add_commands", "cmd_run", "cmd_demo", "run_scene", "ProgressBar", "euler_bernoulli_tip",
-           "DEMO_OUT", "print_advice"]
+           "DEMO_OUT", "print_advice", "print_stable_step"]
 
 DEMO_OUT = "tensormass-demo"
 
@@ -115,7 +115,10 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
     advise = None if quiet else (lambda sim: print_advice(getattr(sim, "advice", ()), stream))
-    data, stopped = _simulate(Simulation, scene, files, progress, advise)
+    checks = [files.check_outputs] if files.picture else []
+    if not quiet and scene.solver.kind == "explicit":      # the stable step, printed before the first step
+        checks.append(lambda sim: print_stable_step(sim, stream))
+    data, stopped = _simulate(Simulation, scene, files, progress, advise, checks)
     if not quiet:
         print_summary(data, stream=stream, json_path=files.json_path)
     if stopped is not None:
@@ -131,7 +134,23 @@ def print_advice(lines, stream=None) -> list:
     return list(lines)
 
 
-def _simulate(Simulation, scene, files, progress, advise=None):
+def print_stable_step(sim, stream=None) -> str | None:
+    """The explicit step against the stable step estimated at rest (Simulation.stable_dt), one line
+    before the first step; returns it (None when there is no estimate)."""
+    crit, dt = getattr(sim, "stable_dt", None), getattr(getattr(sim, "integrator", None), "dt", None)
+    if crit is None or dt is None or not math.isfinite(crit):
+        return None
+    if dt > crit:
+        line = (f"explicit: dt = {_fmt_seconds(dt)} is above the stable step estimated at rest, "
+                f"{_fmt_seconds(crit)} (2 / omega_max): expect the run to diverge or an element to invert; "
+                f"use dt <= {crit:.3g} s or implicit_euler / backward_euler")
+    else:
+        line = f"explicit: dt = {_fmt_seconds(dt)}, stable step estimated at rest {_fmt_seconds(crit)} (2 / omega_max)"
+    print(f"advice: {line}", file=stream if stream is not None else sys.stdout)
+    return line
+
+
+def _simulate(Simulation, scene, files, progress, advise=None, checks=()):
     """(summary dict, None) for a run we stand behind, (summary dict, RunStopped) otherwise.
 
     The command line hands the Simulation the frames' writer and writes the summary itself with
@@ -139,9 +158,8 @@ def _simulate(Simulation, scene, files, progress, advise=None):
     the files dropped a folder made for nothing."""
     sim = None
     try:
-        # the outputs that need the model (a picture's field and mesh) are checked before step 1
-        checks = {"checks": [files.check_outputs]} if files.picture else {}
-        sim = Simulation(scene, progress=progress, writer=files.writer, **checks)
+        # checks(sim) once the model is built, before step 1: the picture asked for can be drawn
+        sim = Simulation(scene, progress=progress, writer=files.writer, **({"checks": list(checks)} if checks else {}))
         if advise is not None:               # the advice the Simulation computed, before its first step
             advise(sim)
         summary, stopped = sim.run(), None
@@ -308,6 +326,8 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     rows.append(("iterations", f"Newton {it.get('newton', '?')}, linear (CG / solves) {it.get('linear', '?')}"))
     if it.get("linear_solvers"):
         rows.append(("linear solver", ", ".join(f"{name} x{n}" for name, n in it["linear_solvers"].items())))
+    if isinstance(data.get("stable_dt"), (int, float)) and math.isfinite(data["stable_dt"]):
+        rows.append(("stable step", f"{_fmt_seconds(data['stable_dt'])} estimated at rest (explicit: 2 / omega_max)"))
     energy = data.get("energy")
     rows.append(("final energy", f"{energy:.6g} J (elastic)" if isinstance(energy, (int, float)) else "n/a"))
     for name, u in (data.get("probes") or {}).items():

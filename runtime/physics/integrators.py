@@ -233,9 +233,10 @@ class Explicit(_Dynamic):
         """Why an explicit run diverges: dt against the stable step estimated at rest."""
         crit = self.stable_dt
         if crit is not None and self.dt > crit:
-            why = f"dt = {self.dt:.3g} exceeds the estimated stable step {crit:.3g}"
+            why = (f"dt = {self.dt:.3g} s exceeds the estimated stable step {crit:.3g} s (2 / omega_max at rest, "
+                   "summary stable_dt)")
         elif crit is not None:
-            why = (f"dt = {self.dt:.3g} is below the estimated stable step {crit:.3g} at rest, "
+            why = (f"dt = {self.dt:.3g} s is below the estimated stable step {crit:.3g} s at rest, "
                    "but the deformed body is stiffer")
         else:
             why = f"dt = {self.dt:.3g} is probably above the stable step"

@@ -274,7 +274,7 @@ class Simulation:
                 self._loop()
                 status, message = self.monitor.verdict()
                 if status == "invalid":
-                    stopped = RunStopped, status, message
+                    stopped = RunStopped, status, message + self._explicit_cause()
             except _WriterFailed as failure:              # disk full, permissions: the environment, not the run
                 raise failure.error from None
             except _CallbackFailed as failure:            # the caller's on_step raised: theirs, as it was
@@ -284,7 +284,8 @@ class Simulation:
             except KeyboardInterrupt:
                 stopped = RunInterrupted, "interrupted", f"interrupted (Ctrl-C) after step {self._step}"
             except (ValueError, ArithmeticError) as exc:          # TensormassError, a failed step, LinAlgError
-                stopped = RunStopped, "failed", f"step {self._step + 1} failed: {exc}"
+                # an inverted element in an explicit run: most often dt above the stable step, said here
+                stopped = RunStopped, "failed", f"step {self._step + 1} failed: {exc}{self._explicit_cause()}"
             if stopped is not None:
                 _, status, message = stopped
                 if self.writer is not None and hasattr(self.writer, "mark_stopped"):
@@ -375,6 +376,12 @@ class Simulation:
         denominator = float(np.sum(g * w * g))
         if denominator > 0:
             V[:, :dim] -= (float(np.sum(g * V[:, :dim])) / denominator) * w * g
+
+    def _explicit_cause(self) -> str:
+        """The explicit step against the stable step, for a failure of an explicit run ("" otherwise):
+        an element that inverts there is the usual sign of a dt above 2 / omega_max."""
+        hint = getattr(getattr(self, "integrator", None), "instability_hint", None)
+        return f"; explicit integration: {hint()}" if hint is not None else ""
 
     def _hint(self, k: int) -> str:
         """What the integrator can say about a divergence (explicit: dt against the stable step)."""
