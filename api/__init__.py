@@ -9,6 +9,11 @@ Every name is imported on first use: `import tensormass` alone loads neither sym
 numba, so the command line can take Ctrl-C cleanly from its first instant (see launcher.py).
 """
 from .generator import GENERATOR_VERSION as __version__
+from .runtime.base.cache import use_numba_cache
+
+# numba's compiled functions go to the user cache, never into this package's folder (numba reads
+# NUMBA_CACHE_DIR when first imported: here, before any tensormass module imports it)
+use_numba_cache()
 
 _ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "DegenerateElementError",
            "KernelNotFoundError", "RunStopped", "RunInterrupted")

@@ -1,19 +1,45 @@
 """The user cache of kernels generated or compiled on demand: where it is and whether it can be
-written (kernels.py passes it to the backends' loaders: generated files, compiled C libraries)."""
+written (kernels.py passes it to the backends' loaders: generated files, compiled C libraries),
+and numba's on-disk cache of compiled functions, kept there too (use_numba_cache).
+
+Light on purpose: `import tensormass` calls use_numba_cache() before anything imports numba, so
+this module imports neither numpy nor numba (TensormassError is imported where it is raised)."""
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 from pathlib import Path
 
 from ...generator import GENERATOR_VERSION
-from .errors import TensormassError
 
 
 def cache_dir() -> Path:
     """Where kernels generated or compiled on demand live ($TENSORMASS_CACHE overrides)."""
     root = os.environ.get("TENSORMASS_CACHE") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tensormass"
     return Path(root) / GENERATOR_VERSION
+
+
+def numba_cache_dir() -> Path:
+    """Where numba keeps the compiled code of @njit(cache=True) functions (the runtime's helpers,
+    the generated numba kernels): inside cache_dir(), never the install folder."""
+    return cache_dir() / "numba"
+
+
+def use_numba_cache() -> str:
+    """Point numba's on-disk cache at numba_cache_dir() unless the user set NUMBA_CACHE_DIR;
+    returns the folder in use. Numba reads NUMBA_CACHE_DIR when it is first imported, so this runs
+    in `import tensormass`; a numba imported before that gets the folder in its config too.
+    Without it numba writes *.nbi/*.nbc into __pycache__ next to each source file: inside
+    site-packages, where pip uninstall leaves them behind."""
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    if folder:
+        return folder
+    folder = os.environ["NUMBA_CACHE_DIR"] = str(numba_cache_dir())
+    config = sys.modules.get("numba.core.config")
+    if config is not None:                 # numba imported before tensormass: its config is read already
+        config.CACHE_DIR = folder
+    return folder
 
 
 def _cache_origin() -> str:
@@ -31,6 +57,7 @@ def writable_cache_dir(folder, needed_for: str) -> Path:
     Only called where something must be written (a kernel generated or compiled now): a
     run whose kernels are committed or already compiled works with a read-only cache.
     Raises TensormassError naming the folder, the setting behind it and what needed it."""
+    from .errors import TensormassError
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)

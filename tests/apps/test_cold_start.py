@@ -47,3 +47,58 @@ def test_a_named_deferred_command_is_built_in_full():
     _, choices = _choices(cli.build_parser(full={cli.named_command(["generate", "--check"])}))
     assert any(a.dest == "check" for a in choices["generate"]._actions)
     assert cli.named_command(["--version"]) is None
+
+
+PACKAGE = os.path.dirname(os.path.abspath(cli.__file__ + "/.."))       # the installed tensormass folder
+
+
+def _numba_files(folder):
+    """{path: mtime} of numba's cache files (*.nbi, *.nbc) under folder."""
+    found = {}
+    for root, _, names in os.walk(folder):
+        for name in names:
+            if name.endswith((".nbi", ".nbc")):
+                path = os.path.join(root, name)
+                found[path] = os.stat(path).st_mtime_ns
+    return found
+
+
+def test_numba_caches_into_the_user_cache_not_the_package(tmp_path):
+    """A fresh process with an empty cache: a cached runtime helper lands in TENSORMASS_CACHE."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["TENSORMASS_CACHE"] = str(tmp_path)
+    before = _numba_files(PACKAGE)
+    code = ("import os, numpy as np, numba; from tensormass.runtime.mesh.topology import _count_sort; "
+            "_count_sort(np.array([0, 1, 1]), 2); print(os.environ['NUMBA_CACHE_DIR'], numba.config.CACHE_DIR)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    from tensormass.runtime.base.cache import GENERATOR_VERSION
+    folder = str(tmp_path / GENERATOR_VERSION / "numba")
+    assert done.stdout.split() == [folder, folder]
+    assert any("_count_sort" in path for path in _numba_files(folder))
+    assert _numba_files(PACKAGE) == before
+
+
+def test_a_users_numba_cache_dir_is_kept(tmp_path, monkeypatch):
+    from tensormass.runtime.base import cache
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "mine"))
+    assert cache.use_numba_cache() == str(tmp_path / "mine")
+    assert os.environ["NUMBA_CACHE_DIR"] == str(tmp_path / "mine")
+
+
+def test_this_process_caches_numba_outside_the_package():
+    """The test session's own numba (imported after tensormass) writes into the user cache."""
+    import numba
+    assert numba.config.CACHE_DIR == os.environ["NUMBA_CACHE_DIR"]
+    assert not os.path.abspath(numba.config.CACHE_DIR).startswith(PACKAGE + os.sep)
+
+
+def test_a_scene_run_writes_no_numba_cache_into_the_package(tmp_path):
+    from tensormass.apps.commands import demo_text, run_scene
+    from tensormass.runtime.scene.scene import Scene
+    text = demo_text().replace("cells = [16, 2, 2]", "cells = [4, 1, 1]")
+    scene = Scene.from_string(text, name="small", source="test")
+    before = _numba_files(PACKAGE)
+    data = run_scene(scene, out=tmp_path / "out", quiet=True)
+    assert data["exit_code"] == 0
+    assert _numba_files(PACKAGE) == before
