@@ -102,3 +102,18 @@ def test_a_scene_run_writes_no_numba_cache_into_the_package(tmp_path):
     data = run_scene(scene, out=tmp_path / "out", quiet=True)
     assert data["exit_code"] == 0
     assert _numba_files(PACKAGE) == before
+
+
+def test_every_package_folder_is_installed():
+    """pyproject's package list names every folder with an __init__.py (a missing wing installs a
+    tensormass that cannot start)."""
+    import tomllib
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    if not (root / "pyproject.toml").exists():
+        pytest.skip("not run from a checkout")
+    tool = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+    expected = {".".join((package, *init.parent.relative_to(root / folder).parts))
+                for package, folder in tool["package-dir"].items()
+                for init in (root / folder).rglob("__init__.py") if "__pycache__" not in init.parts}
+    assert expected - set(tool["packages"]) == set()
