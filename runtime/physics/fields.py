@@ -1,6 +1,7 @@
 """Output fields: stress, strain, energy and ids of every cell (and node) at a state.
 
     point, cell = evaluate(model, u, ["von_mises", "cauchy_stress"])   # dicts name -> array
+    point, cell = evaluate(model, u, ["von_mises@cell", "cauchy_stress@point"])   # the other location
     FIELDS["von_mises"].unit                                             # "Pa"
 
 Every stress and strain field comes from the generated `stress` kernel of each part (one per
@@ -22,6 +23,11 @@ states, but averaged across material interfaces. Tensors are written with 9 comp
 (xx, xy, xz, yx, yy, yz, zx, zy, zz; ParaView's tensor order, read back by meshio as (n, 9));
 2D meshes get full 3x3 tensors (plane strain: F33 = 1, sigma33 from P33, E33 = 0) and 3 stretches.
 
+Where. Each field is written once, at the location FIELDS gives it (Field.where: the tensors,
+stretches, energy density and det_F_min as cell data; von Mises and pressure as point data);
+"name@cell" / "name@point" in [output] fields asks for a location the field offers (Field.other),
+both entries for both. Frames store the stress and strain fields as Float32 (frame_dtype).
+
 Only what a scene asks for is computed: the stress kernels run only when a stress or strain
 field is requested, and only the requested fields are derived from their records.
 """
@@ -34,40 +40,55 @@ import numpy as np
 from ..base.errors import ElementError, TensormassError
 
 __all__ = ["Field", "FIELDS", "DEFAULT_FIELDS", "FieldEvaluator", "evaluate", "check_names", "check_available",
-           "describe", "resolve"]
+           "describe", "resolve", "split_name", "locations", "frame_dtype"]
 
 
 @dataclass(frozen=True)
 class Field:
-    """What an output field is: its description, unit, kind (scalar, vector, tensor) and where it
-    is written (cell data, point data or both)."""
+    """What an output field is: its description, unit, kind (scalar, vector, tensor), where a frame
+    writes it by default (where[0]: "cell" or "point") and where else it may be asked for (other:
+    "name@point" / "name@cell" in [output] fields), and whether frames store it in single precision."""
     name: str
     description: str
     unit: str
     kind: str                    # scalar | vector | tensor
-    where: tuple                 # ("cell",), ("point",) or ("cell", "point")
+    where: tuple                 # ("cell",) or ("point",): the default location, written once
     records: bool = True         # computed from the stress kernels' records
+    other: str | None = None     # the location available on request, or None
+    single: bool = False         # frames store it as Float32 (Simulation.fields() stays float64)
 
 
-_BOTH = ("cell", "point")
+# Where each field is written by default, chosen once per field: the exact per-cell means (tensors,
+# stretches, energies: cell data is what a criterion or an integral reads, and a tetra10 mesh has
+# fewer cells than nodes) as cell data; the scalars one colours by (von Mises, pressure) as point
+# data, smooth in ParaView. The other location costs one more array per frame and is asked for
+# with "name@point" / "name@cell". Record fields are stored as Float32 in the frames (7 significant
+# digits: what a viewer or a criterion reads; Simulation.fields() gives float64).
+_CELL, _POINT = ("cell",), ("point",)
 FIELDS = {f.name: f for f in (
-    Field("cauchy_stress", "Cauchy (true) stress sigma = P F^T / J, 9 components row-major", "Pa", "tensor", _BOTH),
-    Field("von_mises", "von Mises equivalent stress sqrt(3/2 s:s) of the Cauchy stress", "Pa", "scalar", _BOTH),
-    Field("pressure", "pressure -tr(sigma)/3 (positive in compression)", "Pa", "scalar", _BOTH),
-    Field("principal_stretches", "principal stretches sqrt(eig(F^T F)), largest first", "1", "vector", _BOTH),
-    Field("green_lagrange", "Green-Lagrange strain E = (F^T F - I)/2, 9 components row-major", "1", "tensor", _BOTH),
+    Field("cauchy_stress", "Cauchy (true) stress sigma = P F^T / J, 9 components row-major", "Pa", "tensor", _CELL,
+          other="point", single=True),
+    Field("von_mises", "von Mises equivalent stress sqrt(3/2 s:s) of the Cauchy stress", "Pa", "scalar", _POINT,
+          other="cell", single=True),
+    Field("pressure", "pressure -tr(sigma)/3 (positive in compression)", "Pa", "scalar", _POINT, other="cell",
+          single=True),
+    Field("principal_stretches", "principal stretches sqrt(eig(F^T F)), largest first", "1", "vector", _CELL,
+          other="point", single=True),
+    Field("green_lagrange", "Green-Lagrange strain E = (F^T F - I)/2, 9 components row-major", "1", "tensor", _CELL,
+          other="point", single=True),
     Field("det_F_min", "smallest det F (volume ratio J) over the cell's integration points", "1", "scalar",
-          ("cell",)),
-    Field("energy_density", "strain energy density W per unit rest volume", "J/m^3", "scalar", _BOTH),
-    Field("material", "index of the cell's [[material]] entry (0 = the first)", "1", "scalar", ("cell",),
+          _CELL, single=True),
+    Field("energy_density", "strain energy density W per unit rest volume", "J/m^3", "scalar", _CELL,
+          other="point", single=True),
+    Field("material", "index of the cell's [[material]] entry (0 = the first)", "1", "scalar", _CELL,
           records=False),
     Field("law", "law id of the cell: index into the run's law names sorted (Model.law_names(), "
-          "listed in the summary's fields.law_ids)", "1", "scalar", ("cell",), records=False),
+          "listed in the summary's fields.law_ids)", "1", "scalar", _CELL, records=False),
     Field("region", "the cell's mesh tag (gmsh physical id), else the id of the mesh volume group that "
-          "holds it; -1 where the mesh has neither", "1", "scalar", ("cell",), records=False),
+          "holds it; -1 where the mesh has neither", "1", "scalar", _CELL, records=False),
     # The nodal reaction force is runtime.physics.reactions'; it reaches
     # evaluate() through `providers` (Simulation.fields passes it), never computed here.
-    Field("reaction", "reaction force at constrained nodes (runtime.physics.reactions)", "N", "vector", ("point",),
+    Field("reaction", "reaction force at constrained nodes (runtime.physics.reactions)", "N", "vector", _POINT,
           records=False),
 )}
 
@@ -84,24 +105,65 @@ CHUNK = 1024
 PROVIDED = {"reaction": "runtime.physics.reactions"}
 
 
+def split_name(entry: str) -> tuple:
+    """(field name, location or None) of an [output] fields entry: "von_mises" -> ("von_mises", None),
+    "von_mises@cell" -> ("von_mises", "cell")."""
+    name, at, where = entry.partition("@")
+    return name, (where if at else None)
+
+
 def check_names(names, key: str = "output.fields", error=TensormassError) -> tuple:
-    """The names as a tuple, each a known field listed once; `error` naming key[i] otherwise."""
-    out = []
-    for i, name in enumerate(names):
-        if not isinstance(name, str):
-            raise error(f"{key}[{i}]: expected a field name (string), got {type(name).__name__} {name!r}")
+    """The entries as a tuple, each a known field ("name" at its default location, "name@cell" or
+    "name@point" at one it offers) listed once; `error` naming key[i] otherwise."""
+    out, seen = [], {}
+    for i, entry in enumerate(names):
+        if not isinstance(entry, str):
+            raise error(f"{key}[{i}]: expected a field name (string), got {type(entry).__name__} {entry!r}")
+        name, where = split_name(entry)
         if name not in FIELDS:
             raise error(f"{key}[{i}]: unknown field {name!r}; known fields: {', '.join(FIELDS)}")
-        if name in out:
-            raise error(f"{key}[{i}]: field {name!r} is listed twice")
-        out.append(name)
+        field = FIELDS[name]
+        if where is not None and where not in field.where + ((field.other,) if field.other else ()):
+            offered = " or ".join(f"{w} data" for w in field.where + ((field.other,) if field.other else ()))
+            if where not in ("cell", "point"):
+                raise error(f"{key}[{i}]: {entry!r}: the location after @ is cell or point, got {where!r}")
+            raise error(f"{key}[{i}]: {entry!r}: {name} is written as {offered} only")
+        place = (name, where or field.where[0])
+        if place in seen:
+            raise error(f"{key}[{i}]: field {name!r} is listed twice as {place[1]} data ({key}[{seen[place]}] "
+                        f"is {names[seen[place]]!r})")
+        seen[place] = i
+        out.append(entry)
     return tuple(out)
 
 
+def locations(names) -> dict:
+    """{field name: [locations]} of checked entries, in the order first listed."""
+    out = {}
+    for entry in names:
+        name, where = split_name(entry)
+        places = out.setdefault(name, [])
+        place = where or FIELDS[name].where[0]
+        if place not in places:
+            places.append(place)
+    return out
+
+
 def describe(names) -> dict:
-    """{name: {"description", "unit", "kind", "where"}} of the given fields (for summaries)."""
+    """{name: {"description", "unit", "kind", "where"}} of the given entries (for summaries; "where":
+    the locations written)."""
     return {n: {"description": FIELDS[n].description, "unit": FIELDS[n].unit, "kind": FIELDS[n].kind,
-                "where": list(FIELDS[n].where)} for n in names}
+                "where": places} for n, places in locations(names).items()}
+
+
+def frame_dtype(name: str, values):
+    """The dtype a frame stores a field in: float32 for the fields FIELDS marks single, else the
+    values' own (arrays a writer is given under other names keep theirs)."""
+    field = FIELDS.get(name)
+    values = np.asarray(values)
+    if field is not None and field.single and values.dtype.kind == "f":
+        return np.float32
+    return values.dtype
 
 
 def has_stress(kernel) -> bool:
@@ -125,7 +187,7 @@ def resolve(model, names=None) -> tuple:
 def check_available(model, names, providers=()) -> None:
     """Refuse (TensormassError) fields this model cannot give: stress and strain fields need every
     part's kernel to have stress(); provided fields (reaction) need their provider."""
-    names = check_names(list(names), "fields")
+    names = list(locations(check_names(list(names), "fields")))
     asked = [n for n in names if FIELDS[n].records]
     for part in model.parts if asked else ():
         if not has_stress(part.kernel):
@@ -212,12 +274,12 @@ class FieldEvaluator:
     # -- evaluation ---------------------------------------------------------------------------
     def evaluate(self, u, names, providers=None) -> tuple:
         """(point fields, cell fields) of the named fields at displacement u (dicts name -> array)."""
-        names = check_names(list(names), "fields")
+        places = locations(check_names(list(names), "fields"))
         providers = providers or {}
         model = self.model
         n_cells = model.mesh.n_cells
         point, cell = {}, {}
-        wanted = [n for n in names if FIELDS[n].records]
+        wanted = [n for n in places if FIELDS[n].records]
         if wanted:
             volume = np.zeros(n_cells)
             values = {n: None for n in wanted}
@@ -238,11 +300,11 @@ class FieldEvaluator:
                 x = values[n] if values[n] is not None else np.zeros(n_cells)
                 if x.ndim == 3:
                     x = x.reshape(n_cells, 9)
-                if "cell" in FIELDS[n].where:
+                if "cell" in places[n]:
                     cell[n] = x
-                if "point" in FIELDS[n].where:
+                if "point" in places[n]:
                     point[n] = self._nodal(x, volume)
-        for n in names:
+        for n in places:
             if FIELDS[n].records:
                 continue
             if n in PROVIDED:

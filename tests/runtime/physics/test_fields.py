@@ -129,8 +129,10 @@ def tensor(values) -> np.ndarray:
     return np.asarray(values).reshape(-1, 3, 3)
 
 
-ALL = ["cauchy_stress", "von_mises", "pressure", "principal_stretches", "green_lagrange", "det_F_min",
-       "energy_density"]
+# every record field at every location it is offered at ("name@cell" / "name@point")
+ALL = [f"{n}@{w}" for n in ("cauchy_stress", "von_mises", "pressure", "principal_stretches", "green_lagrange",
+                            "det_F_min", "energy_density")
+       for w in fm.FIELDS[n].where + ((fm.FIELDS[n].other,) if fm.FIELDS[n].other else ())]
 F3D = np.array([[1.08, 0.05, -0.02], [0.03, 0.96, 0.04], [-0.01, 0.02, 1.03]])
 F2D = np.array([[1.07, 0.06], [-0.03, 0.95]])
 
@@ -159,7 +161,8 @@ def test_fields_of_a_homogeneous_deformation_are_analytic(law, element, python_k
     assert np.allclose(tensor(cell["green_lagrange"])[0], (C - np.eye(3)) / 2, atol=1e-14)
     assert cell["det_F_min"][0] == pytest.approx(np.linalg.det(F), rel=1e-13)
     assert cell["energy_density"][0] == pytest.approx(energy(law, F), rel=1e-10)
-    assert set(point) == set(ALL) - {"det_F_min"} and set(cell) == set(ALL)
+    names = {a.split("@")[0] for a in ALL}
+    assert set(point) == names - {"det_F_min"} and set(cell) == names
 
 
 @pytest.mark.parametrize("strain", [0.01, -0.01])
@@ -168,7 +171,7 @@ def test_von_mises_of_uniaxial_stress_is_abs_sigma11(strain, python_kernels):
     python_kernels("tetra", "hooke")
     model = one_cell("tetra", "hooke")
     F = np.diag([1 + strain, 1 - NU * strain, 1 - NU * strain])
-    _, cell = fm.evaluate(model, homogeneous(model, F), ["cauchy_stress", "von_mises", "pressure"])
+    _, cell = fm.evaluate(model, homogeneous(model, F), ["cauchy_stress", "von_mises@cell", "pressure@cell"])
     sigma = tensor(cell["cauchy_stress"])[0]
     s11 = YOUNG * strain * (1 + strain) / np.linalg.det(F)
     assert sigma[0, 0] == pytest.approx(s11, rel=1e-12)
@@ -182,14 +185,14 @@ def test_a_rigid_rotation_rotates_the_cauchy_stress(law, python_kernels):
     python_kernels("tetra", law)
     model = one_cell("tetra", law)
     R = rotation([1.0, -2.0, 0.5], 0.7)
-    names = ["cauchy_stress", "von_mises", "principal_stretches", "green_lagrange", "energy_density"]
+    names = ["cauchy_stress", "von_mises@cell", "principal_stretches", "green_lagrange", "energy_density"]
     _, before = fm.evaluate(model, homogeneous(model, F3D), names)
     _, after = fm.evaluate(model, homogeneous(model, R @ F3D), names)
     sigma = tensor(before["cauchy_stress"])[0]
     scale = np.abs(sigma).max()
     assert np.abs(tensor(after["cauchy_stress"])[0] - R @ sigma @ R.T).max() < 1e-10 * scale
     assert np.abs(tensor(after["cauchy_stress"])[0] - sigma).max() > 0.1 * scale      # it did rotate
-    for name in names[1:]:                                   # invariants stay
+    for name in (n.split("@")[0] for n in names[1:]):        # invariants stay
         assert np.allclose(after[name], before[name], rtol=1e-10, atol=1e-12)
 
 
@@ -226,7 +229,8 @@ def test_mixed_mesh_cell_values_ids_and_nodal_volume_average(python_kernels):
         python_kernels(t, "hooke" if t == "hexahedron" else "stvk")
     model = Model.from_scene(scene, mesh)
     F = np.array([[1.02, 0.01, 0.0], [0.0, 0.99, 0.01], [0.01, 0.0, 1.01]])
-    point, cell = fm.evaluate(model, homogeneous(model, F), ["cauchy_stress", "material", "law", "region"])
+    point, cell = fm.evaluate(model, homogeneous(model, F), ["cauchy_stress", "cauchy_stress@point", "material", "law",
+                                                                      "region"])
     ctype = np.concatenate([[b.type] * len(b) for b in mesh.blocks])
     hexa = ctype == "hexahedron"
     assert list(np.unique(cell["material"][hexa])) == [0] and list(np.unique(cell["material"][~hexa])) == [1]
@@ -300,6 +304,9 @@ steps = 1
 @pytest.mark.parametrize("value, message", [
     ('["von_mises", "vonmises"]', "output.fields[1]: unknown field 'vonmises'; known fields: cauchy_stress, von_mises"),
     ('["pressure", "pressure"]', "output.fields[1]: field 'pressure' is listed twice"),
+    ('["pressure", "pressure@point"]', "output.fields[1]: field 'pressure' is listed twice as point data"),
+    ('["det_F_min@point"]', "output.fields[0]: 'det_F_min@point': det_F_min is written as cell data only"),
+    ('["von_mises@node"]', "output.fields[0]: 'von_mises@node': the location after @ is cell or point"),
     ('[3]', "output.fields[0]: expected a field name (string), got int 3"),
     ('"von_mises"', "output.fields: expected an array of field names, got string"),
 ])
@@ -315,6 +322,18 @@ def test_scene_key_default_and_none():
     chosen = Scene.from_string(TINY + '[output]\nfields = ["law", "von_mises"]\n', load_mesh=False).output.fields
     assert chosen == ("law", "von_mises")
     assert set(fm.DEFAULT_FIELDS) <= set(fm.FIELDS) and "reaction" in fm.FIELDS
+    both = Scene.from_string(TINY + '[output]\nfields = ["von_mises", "von_mises@cell"]\n', load_mesh=False)
+    assert fm.locations(both.output.fields) == {"von_mises": ["point", "cell"]}
+
+
+def test_each_default_field_is_written_once(python_kernels):
+    """One location per default field: a frame carries each of them as point or as cell data."""
+    for name in fm.DEFAULT_FIELDS:
+        assert len(fm.FIELDS[name].where) == 1 and fm.locations([name]) == {name: list(fm.FIELDS[name].where)}
+    python_kernels("tetra", "hooke")
+    model = one_cell("tetra", "hooke")
+    point, cell = fm.evaluate(model, np.zeros(12), fm.DEFAULT_FIELDS)
+    assert sorted(list(point) + list(cell)) == sorted(fm.DEFAULT_FIELDS)
 
 
 class _NoStress:
@@ -375,14 +394,11 @@ def test_fields_in_the_vtu_frames_read_back_with_meshio(tmp_path):
             assert data["fields"]["names"] == ["green_lagrange", "material", "energy_density"]
             assert data["fields"]["fields"]["energy_density"]["unit"] == "J/m^3"
     m = frames["default"]
-    assert set(m.point_data) == {"displacement", "von_mises", "cauchy_stress"}
-    assert set(m.cell_data) == {"von_mises", "cauchy_stress", "det_F_min"}
+    assert set(m.point_data) == {"displacement", "von_mises"}          # each default field once
+    assert set(m.cell_data) == {"cauchy_stress", "det_F_min"}
     sigma = m.cell_data["cauchy_stress"][0]
-    assert sigma.shape == (12, 9) and m.point_data["cauchy_stress"].shape == (m.points.shape[0], 9)
+    assert sigma.shape == (12, 9) and sigma.dtype == np.float32 and m.point_data["displacement"].dtype == np.float64
     assert np.abs(sigma).max() > 1.0                         # gravity stresses the bar
-    s = sigma.reshape(-1, 3, 3)
-    dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
-    assert np.allclose(m.cell_data["von_mises"][0], np.sqrt(1.5 * (dev * dev).sum(axis=(1, 2))), rtol=1e-12)
     assert np.all(m.cell_data["det_F_min"][0] > 0.99)
     listed = frames["listed"]
     assert set(listed.cell_data) == {"green_lagrange", "material", "energy_density"}
@@ -393,17 +409,21 @@ def test_fields_in_the_vtu_frames_read_back_with_meshio(tmp_path):
 def test_simulation_fields_match_the_frames(tmp_path):
     """Simulation.fields() at the end of a run = the last frame's data (same scene, same bits)."""
     from tensormass.runtime.run.simulation import Simulation
-    scene_text = TINY + '[output]\nfields = ["von_mises", "cauchy_stress", "det_F_min", "law"]\n'
+    scene_text = TINY + ('[output]\nfields = ["von_mises", "von_mises@cell", "cauchy_stress@point", "cauchy_stress", '
+                         '"det_F_min", "law"]\n')
     run_scene(Scene.from_string(scene_text), out=tmp_path, quiet=True)
     frame = meshio.read(tmp_path / "frame_000001.vtu")
     sim = Simulation(Scene.from_string(scene_text))
     sim.run()
     point, cell = sim.fields()
     assert set(point) == {"von_mises", "cauchy_stress"} and set(cell) == {"von_mises", "cauchy_stress", "det_F_min", "law"}
-    for name, values in point.items():
-        assert np.array_equal(frame.point_data[name], values)
+    for name, values in point.items():                     # stress fields are stored as float32
+        assert np.array_equal(frame.point_data[name], values.astype(frame.point_data[name].dtype))
     for name, values in cell.items():
-        assert np.array_equal(frame.cell_data[name][0], values)
+        assert np.array_equal(frame.cell_data[name][0], values.astype(frame.cell_data[name][0].dtype))
+    s = cell["cauchy_stress"].reshape(-1, 3, 3)
+    dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+    assert np.allclose(cell["von_mises"], np.sqrt(1.5 * (dev * dev).sum(axis=(1, 2))), rtol=1e-12)
     _, only = sim.fields(["energy_density"])
     assert set(only) == {"energy_density"} and np.all(only["energy_density"] > 0)
     with pytest.raises(TensormassError, match=r"fields\[0\]: unknown field 'stress'"):

@@ -131,7 +131,7 @@ def test_edge_springs_on_tetrahedra_run_and_sag():
 
 def test_stress_fields_of_spring_cells_are_written(tmp_path):
     """Output fields of spring cells come from the homogenised record (F, virial stress)."""
-    s = scene(extra=f'[output]\ndir = "{tmp_path}"\nfields = ["von_mises", "energy_density"]')
+    s = scene(extra=f'[output]\ndir = "{tmp_path}"\nfields = ["von_mises@cell", "energy_density"]')
     out = tm.Simulation(s).run()
     assert out.status == "ok"
     import meshio
