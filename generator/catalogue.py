@@ -43,7 +43,7 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
     """Catalogue entries, sorted, filtered by the given names (None = every element and every
     material law; volume measures only when named). Unknown names raise."""
     elements = _check("element", elements, sorted(ELEMENTS))
-    law_names = laws.names() if law_names is None else _check("law", law_names, catalogue_laws())
+    law_names = laws.names(user=False) if law_names is None else _check("law", law_names, catalogue_laws())
     found = []
     for e in elements:
         for law in law_names:
@@ -58,15 +58,16 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
     return sorted(found)
 
 
-def catalogue_laws() -> list[str]:
+def catalogue_laws(user: bool = True) -> list[str]:
     """Every law and volume measure: what generated/ holds kernels of (the measures on every element:
-    the generator does not read the runtime's table of which formulation applies where)."""
-    return laws.names() + laws.measure_names()
+    the generator does not read the runtime's table of which formulation applies where); with user,
+    the law files outside the package too (laws.load_file, $TENSORMASS_LAWS)."""
+    return laws.names(user) + laws.measure_names()
 
 
 def catalogue() -> list[Entry]:
-    """What generated/ holds: every material law's entries and the volume measures' (laws/measures.py)."""
-    return entries(None, catalogue_laws())
+    """What generated/ holds: every built-in material law's entries and the volume measures' (laws/measures.py)."""
+    return entries(None, catalogue_laws(user=False))
 
 
 def _check(kind, given, known):

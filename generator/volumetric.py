@@ -105,9 +105,9 @@ import numpy
 
 
 def module_text(law_names=None) -> str:
-    """The source of generated/volumetric.py for the given laws (default: every law)."""
+    """The source of generated/volumetric.py for the given laws (default: every built-in law)."""
     printer = NumPyPrinter({"fully_qualified_modules": True, "allow_unknown_functions": False})
-    names = sorted(law_names if law_names is not None else laws_pkg.continuum_names())
+    names = sorted(law_names if law_names is not None else laws_pkg.continuum_names(user=False))
     lines, table = [_HEADER], []
     for name in names:
         s = split(name)

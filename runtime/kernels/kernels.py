@@ -402,13 +402,24 @@ def kernel_source(element: str, law: str, quadrature: str, backend: str) -> Path
     from ...generator.catalogue import Entry, entries
     from ...generator.pipeline import generate_all
     entries([element], [law], [quadrature])      # validates the names with clear messages
-    cached = cache_dir() / backend / target.file_name(name)
+    folder = kernel_folder(law)
+    cached = folder / backend / target.file_name(name)
     if not (cached.exists() and _fresh(cached, target)):
         writable_cache_dir(cached.parent, f"generating kernel {name} (not in the committed catalogue)")
-        generate_all([Entry(element, law, quadrature)], [backend], cache_dir(), progress=None)
+        generate_all([Entry(element, law, quadrature)], [backend], folder, progress=None)
     if not cached.exists():
         raise KernelNotFoundError(f"could not generate kernel {name} ({backend})")
     return cached
+
+
+def kernel_folder(law: str) -> Path:
+    """Where kernels of `law` generated on demand live: the user cache; for a law file outside the
+    package (laws.load_file, $TENSORMASS_LAWS) a folder of its own named by the file's content
+    hash, so that an edited law file gets new kernels and never the old ones."""
+    user = laws.user_law(law)
+    if user is None:
+        return cache_dir()
+    return cache_dir() / "laws" / f"{law}-{user.digest}"
 
 
 def _fresh(path: Path, target) -> bool:
