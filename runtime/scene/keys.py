@@ -119,6 +119,8 @@ KEYS = (
         doc="\"all\", an element type, an integer cell tag or group id, or a volume group's name."),
     Key("material", "box", _BOX, unit="m", doc="Only the cells whose centroid lies in the box (with region: both)."),
     Key("material", "law", "string", "stvk", choices="laws:names", doc="The constitutive law (see the catalogue)."),
+    Key("material", "law_file", "string", doc="A law file outside the package (Python defining LAW = Law(...)), "
+        "relative to the scene file; law is then the name it defines (see Materials, Your own law)."),
     Key("material", "quadrature", "string", "gauss2", choices=("gauss1", "gauss2", "gauss3", "exact", "discrete"),
         default_text="gauss2 (discrete laws: discrete; shells: exact)",
         doc="The integration rule; the element x law x quadrature must be in the catalogue."),

@@ -35,7 +35,7 @@ TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
 _REFINE = ("time", "step", "box", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
-_MATERIAL = ("region", "box", "law", "quadrature", "E", "nu", "density", "formulation")
+_MATERIAL = ("region", "box", "law", "law_file", "quadrature", "E", "nu", "density", "formulation")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
 _LOADS = ("gravity", "force", "traction", "moment", "pressure", "gravity_amplitude")
@@ -345,6 +345,9 @@ class Parser:
     def material(self, t, key) -> Material:
         t = self.table(t, key)
         law_name = self.string(t.get("law", "stvk"), f"{key}.law")
+        law_file = None
+        if "law_file" in t:
+            law_file, law_name = self.law_file(t, key)
         try:
             law = laws.get(law_name)
         except laws.LawError as exc:
@@ -374,7 +377,9 @@ class Parser:
         if density <= 0:
             raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
         if law.kind in ("discrete", "shell"):
-            return self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
+            mat = self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
+            mat.law_file = law_file
+            return mat
         native = {p: self.number(t[p], f"{key}.{p}") for p in law.parameters if p in t}
         E = nu = None
         if native and ("E" in t or "nu" in t):
@@ -396,7 +401,7 @@ class Parser:
             E = self.number(t["E"], f"{key}.E")
             nu = self.number(t["nu"], f"{key}.nu")
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
-                       params=native, density=density, formulation=formulation)
+                       params=native, density=density, formulation=formulation, law_file=law_file)
         try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:
@@ -405,6 +410,24 @@ class Parser:
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
         return mat
+
+    def law_file(self, t, key) -> tuple:
+        """A [[material]]'s law_file: a law file outside the package (relative to the scene file),
+        loaded and registered (laws.load_file); law, when given too, must be the name it defines.
+        Returns the file's resolved path and the name of its law."""
+        raw = self.string(t["law_file"], f"{key}.law_file")
+        path = Path(scene_path(raw, self.base_dir))
+        if not path.is_file():
+            raise SceneError(f"{key}.law_file: law file not found: {path} (relative paths are relative to "
+                             "the scene file)")
+        try:
+            law = laws.load_file(path)
+        except laws.LawError as exc:
+            raise SceneError(f"{key}.law_file: {exc}") from None
+        if "law" in t and t["law"] != law.name:
+            raise SceneError(f"{key}.law: {t['law']!r}, but {key}.law_file {raw!r} defines law {law.name!r}; "
+                             f"leave law out or give law = {law.name!r}")
+        return str(path.resolve()), law.name
 
     def _discrete_material(self, t, key, law, region, box, quadrature, formulation, density) -> Material:
         """A discrete law's material: E and nu (what its stiffness rule converts) and its options (A)."""

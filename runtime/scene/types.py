@@ -34,6 +34,7 @@ class Material:
     params: dict = field(default_factory=dict)   # native parameters instead of E, nu (mu=, lam=, C10=, ...)
     density: float = 1000.0
     formulation: str = "displacement"    # runtime.physics.formulations: displacement | mean_dilatation | nodal_pressure
+    law_file: str | None = None          # the file of a law outside the package (laws.load_file), resolved
 
     def native_parameters(self) -> dict:
         """The law's native parameters as floats (from E, nu or as given; laws validates E and nu;
