@@ -15,6 +15,12 @@ Each line names the material (``material[i]``), the element it concerns and what
 - hourglass: an element x quadrature whose stiffness at rest has more zero-energy modes than rigid
   motions (runtime.kernels.hourglass.spurious_modes, decided from the kernel itself).
 
+- body size: a body whose size, weight and stiffness disagree by orders of magnitude, the usual sign of
+  a mesh in millimetres with SI values (mesh coordinates are read in metres): the sag under gravity
+  estimated as rho g L^2 / E (L: the largest side of the bounding box) larger than L itself, or a
+  tissue-like material (TISSUE_E, TISSUE_DENSITY) on a body outside BODY_SIZE. The line names the
+  body's size and the material.
+
 Only the element types a material actually models (its cells in this mesh) are considered.
 """
 from __future__ import annotations
@@ -26,7 +32,14 @@ from ..physics.formulations import DEFAULT_FORMULATION, LINEAR_ELEMENTS, locking
 from ..kernels.hourglass import hourglass_message, spurious_modes
 from ..mesh.regions import assign_materials
 
-__all__ = ["scene_advice", "poisson_ratio", "LOCKING_NU"]
+__all__ = ["scene_advice", "poisson_ratio", "young_modulus", "body_size_advice", "LOCKING_NU", "BODY_SIZE",
+           "TISSUE_E", "TISSUE_DENSITY"]
+
+# Bodies outside this size [m] with a tissue-like material are most likely meshes in other units
+# (an organ is centimetres across: a mesh in millimetres read as metres is 1000 times too big)
+BODY_SIZE = (1e-3, 10.0)
+TISSUE_E = (1e2, 1e7)             # Pa: soft tissue and gels (fat 1 kPa ... cartilage 10 MPa)
+TISSUE_DENSITY = (500.0, 3000.0)  # kg/m^3
 
 # Nearly incompressible from here on: linear displacement elements lock (issue 15: tissue is 0.45-0.499)
 LOCKING_NU = 0.45
@@ -44,6 +57,58 @@ def poisson_ratio(material) -> float | None:
     kappa = p.get("kappa")
     if mu is not None and kappa is not None and 3.0 * kappa + mu != 0:
         return (3.0 * kappa - 2.0 * mu) / (2.0 * (3.0 * kappa + mu))
+    return None
+
+
+def young_modulus(material) -> float | None:
+    """E of a material: as given, or from its native shear modulus (mu; Mooney-Rivlin 2 (C10 + C01))
+    and Poisson's ratio (E = 2 mu (1 + nu); nu unknown: 0.5); None when they do not say."""
+    if material.E is not None:
+        return float(material.E)
+    p = {k: float(v) for k, v in (material.params or {}).items() if isinstance(v, (int, float))}
+    mu = 2.0 * (p["C10"] + p["C01"]) if "C10" in p and "C01" in p else p.get("mu")
+    if mu is None or mu <= 0:
+        return None
+    nu = poisson_ratio(material)
+    return 2.0 * mu * (1.0 + (0.5 if nu is None else nu))
+
+
+def body_size_advice(scene, mesh) -> str | None:
+    """One line when the body's size, weight and stiffness disagree by orders of magnitude (see the
+    module docstring), naming the size; None otherwise."""
+    points = np.asarray(mesh.points, dtype=float)
+    if points.size == 0 or not np.all(np.isfinite(points)):
+        return None
+    sides = points.max(axis=0) - points.min(axis=0)
+    size = float(sides.max())
+    if size <= 0:
+        return None
+    g = float(np.linalg.norm(getattr(scene.loads, "gravity", (0.0, 0.0, 0.0))))
+    box = " x ".join(f"{x:.3g}" for x in sides)
+    worst = None                              # (sag / size, key, E, density) of the material that sags most
+    tissue = None
+    for i, material in enumerate(scene.materials):
+        E = None if laws.is_discrete(material.law) else young_modulus(material)
+        if E is None or E <= 0:
+            continue
+        rho, key = float(material.density), f"material[{i}]"
+        ratio = rho * g * size / E            # (rho g L^2 / E) / L
+        if worst is None or ratio > worst[0]:
+            worst = (ratio, key, E, rho)
+        if tissue is None and TISSUE_E[0] <= E <= TISSUE_E[1] and TISSUE_DENSITY[0] <= rho <= TISSUE_DENSITY[1]:
+            tissue = (key, E, rho)
+    units = ("mesh coordinates are read in metres: a mesh in millimetres needs scaling by 0.001 "
+             "(gmsh: Mesh.ScalingFactor = 0.001), or the values in the mesh's units")
+    if worst is not None and worst[0] > 1.0:
+        ratio, key, E, rho = worst
+        return (f"the body is {size:.3g} m across (bounding box {box} m): under gravity ({g:.3g} m/s^2) {key} "
+                f"(E = {E:.3g} Pa, density = {rho:.4g} kg/m^3) would sag by about rho g L^2 / E = "
+                f"{ratio * size:.3g} m, {ratio:.3g} times its size; {units}")
+    if tissue is not None and not BODY_SIZE[0] <= size <= BODY_SIZE[1]:
+        key, E, rho = tissue
+        return (f"the body is {size:.3g} m across (bounding box {box} m), with the tissue-like {key} (E = {E:.3g} Pa, "
+                f"density = {rho:.4g} kg/m^3): a size outside {BODY_SIZE[0]:g} to {BODY_SIZE[1]:g} m is most likely a "
+                f"mesh in other units; {units}")
     return None
 
 
@@ -96,4 +161,7 @@ def scene_advice(scene, mesh=None) -> list:
             count = spurious_modes(element, material.law, material.quadrature, backend)
             if count:
                 advice.append(f"{key}: {hourglass_message(element, material.quadrature, count)}")
+    size = body_size_advice(scene, mesh)
+    if size is not None:
+        advice.append(size)
     return advice
