@@ -231,9 +231,9 @@ def check_against_mesh(scene, mesh) -> None:
         orphans = np.flatnonzero(w < 0)
         if orphans.size:
             ids = ", ".join(str(int(offset + c)) for c in orphans[:8]) + (", ..." if orphans.size > 8 else "")
-            tag = "" if blk.tags is None else f" (tag {int(blk.tags[orphans[0]])})"
-            raise SceneError(f"material: {orphans.size} {blk.type} cell(s){tag} match no [[material]]: "
-                             f"cells [{ids}]; add a last [[material]] with region = \"all\"")
+            where, fix = _orphan_groups(mesh, blk, offset + orphans, orphans)
+            raise SceneError(f"material: {orphans.size} {blk.type} cell(s){where} match no [[material]]: "
+                             f"cells [{ids}]; {fix}add a last [[material]] with region = \"all\"")
         for i in np.unique(w):
             m = scene.materials[int(i)]
             catalogue_check(f"material[{int(i)}].quadrature", blk.type, m.law, m.quadrature)
@@ -242,6 +242,21 @@ def check_against_mesh(scene, mesh) -> None:
         offset += len(blk)
     check_unused_materials(scene.materials, mesh, which)
     _check_adapt(scene, mesh, which)
+
+
+def _orphan_groups(mesh, blk, global_ids, local) -> tuple:
+    """(" in group 'tumour' (id 2, volume)", "add a [[material]] with region = \"tumour\", or ") for
+    cells without a material: the mesh's volume groups that hold them, by name (their id when the
+    file names none); the block's cell tag when no group holds them."""
+    held = [g for g in getattr(mesh, "groups", ()) if g.cell_ids.size and np.isin(global_ids, g.cell_ids).any()]
+    if held:
+        labels = ", ".join(g.label for g in held[:4]) + (", ..." if len(held) > 4 else "")
+        first = held[0]
+        region = f'"{first.name}"' if first.name is not None else str(first.id)
+        return f" in group{'s' if len(held) > 1 else ''} {labels}", f"give a [[material]] region = {region}, or "
+    if blk.tags is not None:
+        return f" (cell tag {int(blk.tags[local[0]])}, in no named group)", ""
+    return "", ""
 
 
 def _check_region_load(mesh, load, key, tol) -> None:
