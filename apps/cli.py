@@ -87,9 +87,14 @@ def cmd_generate(args) -> int:
     from ..generator.catalogue import catalogue_laws, entries
     from ..generator.elements import ELEMENTS
     from ..generator.pipeline import generate_all
-    # no --law: the whole catalogue, the formulations' volume-measure kernels too
+    from .. import laws
+    from ..runtime.base.cache import writable_cache_dir
+    from ..runtime.kernels.kernels import kernel_folder
+    # --law takes names and law files (FILE.py: a law outside the package, laws.load_file);
+    # no --law: the whole catalogue of built-in laws, the formulations' volume-measure kernels too
+    law_names = [laws.load_file(v).name if v.endswith(".py") else v for v in _names(args.law, None, "law") or []]
     selected = entries(_names(args.element, ELEMENTS, "element"),
-                       _names(args.law, catalogue_laws(), "law") or catalogue_laws(),
+                       law_names or catalogue_laws(user=False),
                        _names(args.quadrature, None, "quadrature"))
     backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
     unknown = sorted(set(backends) - set(BACKENDS))
@@ -97,12 +102,28 @@ def cmd_generate(args) -> int:
         raise ValueError(f"unknown backend {', '.join(unknown)}; known: {', '.join(BACKENDS)}")
     if args.check:
         return check(selected, backends)
-    out = _output_folder(args.out)
-    generate_all(selected, backends, out, constants=args.constants)
-    shape_tables.write(out)                # N, dN/dxi for consistent loads and masses (runtime/assembly/loads.py)
-    volumetric.write(out)                  # U(theta) of every law, for the locking-free formulations
-    if "numba" in backends and not args.no_compile and args.constants == "precompute":
-        report_numba_compile_times(selected, out)
+    # Without --out, a user law's kernels go where runs look for them: the user cache, in the
+    # folder of the law file's content (runtime.kernels.kernels.kernel_folder).
+    user = sorted({e.law for e in selected if laws.user_law(e.law)}) if args.out is None else []
+    builtin = [e for e in selected if e.law not in user]
+    out = _output_folder(args.out if args.out is not None else "tensormass-kernels") if builtin else None
+    for law in user:
+        folder = writable_cache_dir(kernel_folder(law), f"generate --law {law}")
+        law_entries = [e for e in selected if e.law == law]
+        generate_all(law_entries, backends, folder, constants=args.constants)
+        if "numba" in backends and not args.no_compile and args.constants == "precompute":
+            report_numba_compile_times(law_entries, folder)
+        print(f"law {law!r} ({laws.user_law(law).path}): kernels in the user cache, {folder}; runs that "
+              f"load this file (law_file in a [[material]], or ${laws.SEARCH_PATH}) use them")
+    if builtin:
+        generate_all(builtin, backends, out, constants=args.constants)
+        shape_tables.write(out)            # N, dN/dxi for consistent loads and masses (runtime/assembly/loads.py)
+        volumetric.write(out)              # U(theta) of every built-in law, for the locking-free formulations
+        if "numba" in backends and not args.no_compile and args.constants == "precompute":
+            report_numba_compile_times(builtin, out)
+        if args.out is None:
+            print(f"runs read the kernels of built-in laws from this installation ({committed_dir()}), not "
+                  f"from {out}; in a checkout, --out generated replaces the committed ones")
     return 0
 
 
@@ -183,10 +204,12 @@ def add_generate_command(subparsers) -> None:
     from ..generator.elements import ELEMENTS
     p = subparsers.add_parser("generate", help=DEFERRED["generate"][2])
     p.add_argument("--element", nargs="+", help=f"element(s) or all: {', '.join(ELEMENTS)}")
-    p.add_argument("--law", nargs="+", help=f"law(s), volume measure(s) or all (the default): {', '.join(catalogue_laws())}")
+    p.add_argument("--law", nargs="+", help=f"law(s), volume measure(s), law files (FILE.py) or all (the default): "
+                                            f"{', '.join(catalogue_laws())}")
     p.add_argument("--quadrature", nargs="+", help="quadrature(s) or all: gauss1 gauss2 gauss3 exact")
     p.add_argument("--backend", nargs="+", help=f"backend(s) or all: {', '.join(BACKENDS)}")
-    p.add_argument("--out", default="tensormass-kernels", help="output folder (default: ./tensormass-kernels)")
+    p.add_argument("--out", help="output folder (default: a law file's kernels into the user cache, where runs "
+                                 "look; the built-in laws' into ./tensormass-kernels)")
     p.add_argument("--constants", choices=("precompute", "recompute"), default="precompute",
                    help="precompute: shape gradients and det J per point stored per element (default, the catalogue); "
                         "recompute: store rest coordinates and recompute the geometry at every call")
