@@ -172,7 +172,7 @@ class TopologyEvents:
                 else:
                     gone = removal(mesh, self._select_cells(mesh, action.event))
                     self._renumber(n, gone)
-                    probes = _probes_after(probes, gone)
+                    probes = _probes_after(probes, gone, _selection(e))
                     mesh = gone.apply(mesh)
             except TopologyError as exc:
                 message = str(exc).split(": ", 1)[-1] if str(exc).startswith(("cut:", "remove:")) else str(exc)
@@ -269,8 +269,17 @@ class TopologyEvents:
         return list(self.records)
 
 
-def _probes_after(probes: dict, gone) -> dict:
-    """Probes' (cell, nodes) after a removal; TopologyError when one loses its cell or a node it reads."""
+def _selection(event) -> str:
+    """What selects a removal's cells, as its messages name it: "box", "region 'tumour'" or both."""
+    region = None if event.region is None else f"region {event.region!r}"
+    if region is not None and event.box is not None:
+        return f"{region} and its box"
+    return region or "box"
+
+
+def _probes_after(probes: dict, gone, selection: str = "box") -> dict:
+    """Probes' (cell, nodes) after a removal; TopologyError when one loses its cell or a node it reads.
+    selection: what chose the removed cells (_selection), named in the message."""
     orphans = set(gone.orphans.tolist())
     out = {}
     for name, (cell, nodes) in probes.items():
@@ -278,10 +287,10 @@ def _probes_after(probes: dict, gone) -> dict:
             cell = int(gone.new_ids[cell])
             if cell < 0:
                 raise TopologyError(f"the cells it removes hold probe {name!r}, which would read nothing from "
-                                    "then on; move the probe or the box")
+                                    f"then on; move the probe or narrow the removal's {selection}")
         elif orphans & set(np.asarray(nodes).tolist()):
             raise TopologyError(f"it leaves nodes probe {name!r} averages without a cell, which would read zero "
-                                "from then on; narrow the probe's region/box or the removal's")
+                                f"from then on; narrow the probe's region/box or the removal's {selection}")
         out[name] = (cell, nodes)
     return out
 

@@ -47,3 +47,45 @@ def test_cells_without_a_material_are_named_by_their_group(tmp_path):
 def test_unnamed_groups_are_named_by_their_id(tmp_path):
     with pytest.raises(SceneError, match=r"in group id 2 \(volume\) match no \[\[material\]\].*region = 2, or"):
         _scene(tmp_path, names=False)
+
+
+def _removal_scene(tmp_path, remove):
+    _write_organ(tmp_path / "organ.msh")
+    import tensormass as tm
+    return tm.Scene.from_dict({
+        "mesh": {"file": "organ.msh"},
+        "material": [{"region": "all", "E": 3e3, "nu": 0.3, "law": "stvk"}],
+        "fixed": [{"box": [[-1, -1, -1], [1e-9, 1, 1]]}],
+        "solver": {"kind": "static", "steps": 2, "backend": "c"},
+        "probe": [{"name": "lump", "point": [0.9, 0.1, 0.1]}],
+        "remove": [{"name": "resection", "step": 1, **remove}]}, base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("remove, named", [
+    ({"region": "tumour"}, "move the probe or narrow the removal's region 'tumour'"),
+    ({"box": [[0.5, -1, -1], [2, 1, 1]]}, "move the probe or narrow the removal's box"),
+    ({"region": "tumour", "box": [[0.5, -1, -1], [2, 1, 1]]},
+     "move the probe or narrow the removal's region 'tumour' and its box"),
+])
+def test_a_removal_taking_a_probe_names_what_selected_its_cells(tmp_path, remove, named):
+    import tensormass as tm
+    with pytest.raises(tm.TensormassError) as err:
+        tm.Simulation(_removal_scene(tmp_path, remove), output=False)
+    text = str(err.value)
+    assert text.startswith("remove 'resection': the cells it removes hold probe 'lump'")
+    assert text.endswith(named)
+
+
+def test_a_cut_refused_for_the_model_says_its_kind_once(tmp_path):
+    import tensormass as tm
+    scene = tm.Scene.from_dict({
+        "mesh": {"generate": "plate", "size": [1.0, 1.0], "cells": [2, 2]},
+        "material": [{"law": "cst_dkt", "E": 1e7, "nu": 0.3, "thickness": 0.01, "density": 1000.0}],
+        "fixed": [{"box": [[-1, -1, -1], [1e-9, 2, 1]]}],
+        "solver": {"kind": "static", "steps": 2, "backend": "c"},
+        "cut": [{"step": 1, "plane": [[0.5, 0, 0], [1, 0, 0]]}]})
+    with pytest.raises(tm.TensormassError) as err:
+        tm.Simulation(scene, output=False)
+    text = str(err.value)
+    assert text.startswith("cut: only solid meshes can change topology here")
+    assert "cut/remove" not in text and text.count("cut:") == 1
