@@ -96,12 +96,13 @@ _RUN_FAILURES = (TensormassError, ValueError, ArithmeticError, RuntimeError)
 
 
 def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, stream=None,
-              overwrite: bool = False) -> dict:
+              overwrite: bool = False, dir_from: str | None = None) -> dict:
     """Run a validated scene; returns the summary dict (Summary.to_dict() plus format, status,
     message, exit_code, scene and output), written where runtime.run.run_files says (the output
     folder's summary.json, and json_path when given): the same files as Simulation(scene).run().
 
-    out overrides scene.output.dir; frames go there every scene.output.every steps.
+    out overrides scene.output.dir; frames go there every scene.output.every steps. dir_from: how
+    the folder was chosen, said in the summary (default: given on the command line when out is).
     Everything that can be checked is checked before the first step (the --json path,
     the output folder: see output.Writer.prepare). A run that stops (RunStopped: diverged,
     failed, invalid, interrupted) still writes its summary; data["exit_code"] says how it
@@ -110,8 +111,11 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     from ..runtime.run.run_files import RunFiles
     stream = stream if stream is not None else sys.stdout
     files = RunFiles(scene, out=out, json_path=json_path, overwrite=overwrite,
-                     dir_from="given on the command line, relative to the working directory" if out is not None else None)
+                     dir_from=dir_from or ("given on the command line, relative to the working directory"
+                                           if out is not None else None))
     files.prepare()
+    if not quiet:
+        print(backend_note(scene.solver.backend), file=stream)
     Simulation = _simulation_class()
     progress = None if quiet else ProgressBar(label="step" if scene.solver.kind != "static" else "load step")
     advise = None if quiet else (lambda sim: print_advice(getattr(sim, "advice", ()), stream))
@@ -124,6 +128,17 @@ def run_scene(scene: Scene, out=None, json_path=None, quiet: bool = False, strea
     if stopped is not None:
         print(f"tensormass: run {data['status']}: {data['message']}", file=sys.stderr)
     return data
+
+
+def backend_note(backend: str) -> str:
+    """Which kernel backend runs and why: what a first run spends compiling depends on it."""
+    from ..backends.c.loader import default_backend
+    if backend == "c":
+        return ("kernels: C backend (compiled by the C compiler, about 1 s per kernel the first time, then "
+                "taken from the user cache; [solver] backend = \"numba\" for numba)")
+    why = ("no C compiler was found; with gcc, the default C backend compiles a kernel in about 1 s"
+           if default_backend() == "numba" else "[solver] backend = \"numba\"; the C backend compiles in about 1 s")
+    return f"kernels: numba backend (6 to 40 s per kernel the first time, then cached; {why})"
 
 
 def print_advice(lines, stream=None) -> list:
@@ -423,8 +438,10 @@ def cmd_demo(args) -> int:
     print(f"tensormass demo: a {size} m mixed bar ({types}; {mesh.n_points} nodes), rho = {m0.density:g} kg/m^3, "
           f"E = {m0.E:g} Pa, nu = {m0.nu:g}, clamped at x = 0, under gravity; {scene.solver.kind} solve "
           f"({scene.solver.steps} step(s)); laws {laws}")
+    given = ("given on the command line (--out), relative to the working directory" if args.out else
+             f"the demo's default ./{DEMO_OUT}, relative to the working directory (--out chooses another)")
     data = run_scene(scene, out=out, json_path=args.json, quiet=getattr(args, "quiet", False),
-                     overwrite=getattr(args, "overwrite", False))
+                     overwrite=getattr(args, "overwrite", False), dir_from=given)
     tip = (data.get("probes") or {}).get("tip")
     if tip is not None and data["exit_code"] == 0:      # no comparison for a result we do not trust
         eb, timo = euler_bernoulli_tip(scene)
