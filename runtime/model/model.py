@@ -577,15 +577,26 @@ class Model:
         return np.take(U, part.cells_active, axis=0, out=out, mode="clip")   # "clip": unbuffered
 
     def warm_up(self, outputs=None) -> None:
-        """Compile (or load from numba's cache) the kernel outputs the solver will call."""
+        """Compile (or load from numba's cache) the kernel outputs the solver will call: outputs, or
+        warm_up_outputs(part) of each part (numba compiles each output on its first call, 6 to 40 s
+        cold; a C kernel is compiled whole when loaded, so this only loads it)."""
         for part in self.parts:
             D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dofs_per_node))
-            for name in outputs or self.outputs:
+            for name in outputs or self.warm_up_outputs(part):
                 getattr(part.kernel, name)(D, u)
         for c in self.couplings:                  # the formulations' measure kernels (energy: every call)
             D, u = c.D[:1], np.zeros((1, c.kernel.n_nodes, self.dofs_per_node))
             for name in sorted({"energy", *(outputs or self.outputs)}):
                 getattr(c.kernel, name)(D, u)
+
+    def warm_up_outputs(self, part) -> tuple:
+        """The kernel outputs a run calls on this part: the solver's outputs, except for a law
+        quadratic in grad u under a solver that assembles K: the assembly builds its constant K once
+        (runtime.assembly.assembly, Assembly.constant) and takes its energy and forces from K, so
+        only its stiffness runs."""
+        if "stiffness" in self.outputs and laws.is_quadratic(part.law):
+            return ("stiffness",)
+        return tuple(self.outputs)
 
     @property
     def n_elements(self) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ... import laws
+from ...backends.c.loader import default_backend
 from ..physics.motion import Rotation
 
 
@@ -96,7 +97,7 @@ class Solver:
     rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)
     project_psd: bool | None = None       # None: plain Newton, projection switched on when a step fails to descend
     rho_inf: float = 1.0                  # generalized_alpha: 1 = no numerical damping, < 1 damps high frequencies
-    backend: str = "numba"                # kernel backend: numba | c
+    backend: str = field(default_factory=default_backend)   # c | numba: c when a C compiler is found
     # Health monitor (runtime/physics/health.py): when a run leaves the trusted region
     health_monitor: bool = True           # false: no checks (a run may then end in a meaningless state)
     max_energy_growth: float = 100.0      # stop when the energy balance grows by this x the scene's energy scale
@@ -122,6 +123,8 @@ class Output:
     fields: tuple | None = None           # names from runtime.physics.fields.FIELDS; None: its DEFAULT_FIELDS
     picture: str | None = None            # a PNG of the deformed body coloured by this field at the end
     plot: bool = False                    # the per-step history as a PNG beside the summary
+    view: tuple | None = None             # the picture's camera (azimuth, elevation) in degrees; None: (-60, 20)
+    clip: tuple | None = None             # the picture's cut-away ((point), (normal)): the side the normal points to is removed
 
 
 @dataclass

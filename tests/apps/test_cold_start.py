@@ -117,3 +117,39 @@ def test_every_package_folder_is_installed():
                 for package, folder in tool["package-dir"].items()
                 for init in (root / folder).rglob("__init__.py") if "__pycache__" not in init.parts}
     assert expected - set(tool["packages"]) == set()
+
+
+def test_the_default_backend_is_c_with_a_compiler_else_numba(monkeypatch):
+    from tensormass.apps.commands import backend_note
+    from tensormass.backends.c.loader import default_backend
+    from tensormass.runtime.scene.scene import Scene
+    from tensormass.runtime.scene.types import Solver
+    text = ("[mesh]\ngenerate = \"bar\"\n[[material]]\nlaw = \"stvk\"\nE = 1e6\nnu = 0.3\n"
+            "[[fixed]]\nbox = [[-1, -1, -1], [0, 2, 2]]\n")
+    assert default_backend() == "c"                       # this machine builds the C kernels (gcc)
+    assert Solver().backend == "c" and Scene.from_string(text).solver.backend == "c"
+    monkeypatch.setenv("CC", "no-such-compiler-here")
+    assert default_backend() == "numba"
+    assert Solver().backend == "numba" and Scene.from_string(text).solver.backend == "numba"
+    assert "no C compiler was found" in backend_note("numba")
+    scene = Scene.from_string(text + "[solver]\nbackend = \"c\"\n")
+    assert scene.solver.backend == "c"                    # a scene's own choice stays
+
+
+def test_warm_up_calls_only_the_outputs_the_run_calls():
+    """A Hooke part under an implicit solver: its constant K is assembled once, and its energy
+    and forces come from K, so the warm-up compiles only its stiffness."""
+    from tensormass.apps.commands import demo_text
+    from tensormass.runtime.model.model import Model
+    from tensormass.runtime.scene.scene import Scene
+    text = demo_text().replace("cells = [16, 2, 2]", "cells = [4, 1, 1]").replace(
+        'linear = "direct"', 'linear = "direct"\nbackend = "numba"')
+    model = Model.from_scene(Scene.from_string(text, name="small", source="test"))
+    called = []
+    for part in model.parts:
+        for name in ("energy", "forces", "stiffness", "forces_and_stiffness"):
+            setattr(part.kernel, name, lambda D, u, _k=(part.law, name): called.append(_k))
+    model.warm_up()
+    assert {law for law, _ in called} == {"hooke", "stvk"}
+    assert sorted({k for k in called if k[0] == "hooke"}) == [("hooke", "stiffness")]
+    assert sorted({k for k in called if k[0] == "stvk"}) == [("stvk", name) for name in sorted(model.outputs)]

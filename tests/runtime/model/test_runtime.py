@@ -335,7 +335,7 @@ def test_summary_writer_and_progress():
     assert set(d["time"]) >= {"setup", "first_step", "assembly", "linear_solve", "total"}
     assert d["iterations"]["newton"] == 5 and d["steps"] == 5
     assert d["kernels"] == [{"element": "hexahedron", "law": "hooke", "quadrature": "gauss2",
-                             "backend": "numba", "outputs": ["energy", "forces", "stiffness"], "elements": 48,
+                             "backend": scene.solver.backend, "outputs": ["energy", "forces", "stiffness"], "elements": 48,
                              "colours": 1, "segments": 1}]
     assert sim.displacement.shape == (sim.model.n_points, 3)
     assert summary["energy"] == pytest.approx(summary.per_step["elastic"][-1])
