@@ -44,7 +44,7 @@ from .curves import plot_history
 from .history import write_history_csv
 from .output import SUMMARY_FORMAT, Writer, check_summary_path, is_summary_file, write_summary
 
-__all__ = ["RunFiles", "SUMMARY_NAME"]
+__all__ = ["RunFiles", "SUMMARY_NAME", "summary_mapping"]
 
 SUMMARY_NAME = "summary.json"
 
@@ -105,10 +105,8 @@ class RunFiles:
             if field not in ("displacement", "u"):
                 from ..physics.fields import check_available
                 check_available(sim.model, [field], sim._field_providers())
-            from .picture import render_picture
-            mesh = sim.model.mesh
-            render_picture(mesh, mesh.points, np.zeros_like(mesh.points), None, "displacement", unit="m",
-                           size=(160, 120))
+            from .picture import check_picture
+            check_picture(sim.model)             # the scene's view and clip included
         except TensormassError as exc:
             hint = "" if field == "displacement" else " (a picture of the displacement: --picture displacement)"
             raise TensormassError(f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused before the "
@@ -258,25 +256,36 @@ class RunFiles:
 
     def summary_data(self, summary, stopped) -> dict:
         """The summary dict: the runtime's Summary (when there is one), how the run ended, scene, output."""
-        scene, mesh, writer = self.scene, self.mesh, self.writer
-        data = {"format": SUMMARY_FORMAT}
-        if summary is not None:
-            data.update(summary.to_dict())
-        if stopped is not None:
-            data.update(status=stopped.status, message=str(stopped), exit_code=stopped.exit_code)
-        else:
-            data.setdefault("status", "ok")
-            data.setdefault("message", None)
-            data["exit_code"] = EXIT_OK
-        data.setdefault("warnings", [])
-        data["scene"] = {"name": scene.name, "source": scene.source, "solver": scene.solver.kind,
-                         "nodes": mesh.n_points,
-                         "cells": {b: sum(len(x) for x in mesh.blocks if x.type == b) for b in mesh.cell_types()}}
-        data["output"] = None if writer is None else {
+        scene, writer = self.scene, self.writer
+        output = None if writer is None else {
             "dir": str(self.out_dir), "pvd": str(writer.pvd_path) if writer.frames else None,
             "frames": len(writer.frames), "every": scene.output.every, "dir_from": self.dir_from,
             "summary": str(self.summary_path) if writer.frames else None}
+        data = summary_mapping(summary, stopped, scene, self.mesh, output)
+        if summary is not None and hasattr(summary, "attach"):
+            summary.attach(data)             # the Summary reads like what summary.json holds
         return data
+
+
+def summary_mapping(summary, stopped, scene, mesh, output=None) -> dict:
+    """What summary.json holds (without a file): the runtime's Summary (when there is one), how the
+    run ended (stopped: the RunStopped, None for a result we stand behind), the scene on its rest
+    mesh (None without a scene), and the output entry (None: no output folder)."""
+    data = {"format": SUMMARY_FORMAT}
+    if summary is not None:
+        data.update(summary.to_dict())
+    if stopped is not None:
+        data.update(status=stopped.status, message=str(stopped), exit_code=stopped.exit_code)
+    else:
+        data.setdefault("status", "ok")
+        data.setdefault("message", None)
+        data["exit_code"] = EXIT_OK
+    data.setdefault("warnings", [])
+    data["scene"] = None if scene is None else {
+        "name": scene.name, "source": scene.source, "solver": scene.solver.kind, "nodes": mesh.n_points,
+        "cells": {b: sum(len(x) for x in mesh.blocks if x.type == b) for b in mesh.cell_types()}}
+    data["output"] = output
+    return data
 
 
 def _optional_failed(data, what, path, exc) -> str:

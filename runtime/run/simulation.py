@@ -51,7 +51,10 @@ _EXIT = {"ok": EXIT_OK, "warnings": EXIT_OK, "invalid": EXIT_UNTRUSTED, "diverge
 
 @dataclass
 class Summary:
-    """What a run did and what it cost; dict-like (summary["probes"]) and JSON-ready via to_dict()."""
+    """What a run did and what it cost. Attributes for the runtime's own fields (summary.probes);
+    as a mapping it reads like the summary.json of the run (summary["output"], summary["scene"],
+    summary["format"], dict(summary), the same keys and values as the file: runtime.run.run_files),
+    also for a run that writes no file. to_dict(): the runtime's fields alone, JSON-ready."""
     name: str
     solver: str
     steps: int
@@ -89,11 +92,40 @@ class Summary:
         out["exit_code"] = self.exit_code
         return out
 
+    def attach(self, data: dict) -> None:
+        """The summary.json mapping of this run (runtime.run.run_files.summary_mapping), read by [] and keys()."""
+        self._mapping = data
+
+    def _data(self) -> dict:
+        data = getattr(self, "_mapping", None)
+        return data if data is not None else self.to_dict()
+
     def __getitem__(self, key):
-        return getattr(self, key)
+        data = self._data()
+        if key not in data:
+            raise KeyError(f"{key!r}: not a key of the run summary (its keys: {', '.join(data)})")
+        return data[key]
+
+    def __contains__(self, key) -> bool:
+        return key in self._data()
+
+    def __iter__(self):
+        return iter(self._data())
+
+    def __len__(self) -> int:
+        return len(self._data())
 
     def keys(self):
-        return self.to_dict().keys()
+        return self._data().keys()
+
+    def items(self):
+        return self._data().items()
+
+    def values(self):
+        return self._data().values()
+
+    def get(self, key, default=None):
+        return self._data().get(key, default)
 
 
 def _History() -> History:
@@ -157,6 +189,7 @@ class Simulation:
         # runtime.change.events: [[cut]] / [[remove]], rehearsed on the rest mesh now
         self.topology = TopologyEvents(self.model, events) if events else None
         self._u0, self._v0 = self._initial(u0), self._initial(v0)
+        self._rest_mesh = self.model.mesh          # the summary's "scene" counts the mesh the run began with
         self.ctx = None
         self.stable_dt = None
         self.summary = None
@@ -250,7 +283,13 @@ class Simulation:
         scene asks for are written in both cases (sim.data: the summary as written).
         """
         if self.files is None:
-            return self._run()
+            try:
+                summary = self._run()
+            except RunStopped as stopped:
+                self._attach_mapping(stopped.summary, stopped)
+                raise
+            self._attach_mapping(summary, None)
+            return summary
         try:
             summary = self._run()
         except RunStopped as stopped:
@@ -261,6 +300,21 @@ class Simulation:
             raise
         self.data = self.files.finish(summary, sim=self)
         return summary
+
+    def _attach_mapping(self, summary, stopped) -> None:
+        """A run that writes no file: its Summary still reads like the summary.json it would have
+        written (no "output": None)."""
+        if summary is None:
+            return
+        from .run_files import summary_mapping
+        scene = self.model.scene
+        summary.attach(summary_mapping(summary, stopped, scene, self._rest_mesh))
+
+    def probes(self) -> dict:
+        """{name: displacement [m] (a list, dim values)} of every [[probe]] at the current state: the
+        values the summary's "probes" holds at the end (before the first step: the initial state)."""
+        u = self.ctx.u if self.ctx is not None else (self._u0 if self._u0 is not None else np.zeros(self.model.n_dofs))
+        return self.model.probe_values(u)
 
     def _run(self) -> Summary:
         start = time.perf_counter()
