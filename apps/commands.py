@@ -401,6 +401,9 @@ def cmd_run(args) -> int:
         scene.output.picture = picture_field(True if args.picture == "" else args.picture, "--picture")
     if getattr(args, "plot", False):
         scene.output.plot = True
+    if getattr(args, "view", None) is not None:         # --view overrides [output] view
+        from ..runtime.scene.parser import view_text
+        scene.output.view = view_text(args.view)
     data = run_scene(scene, out=args.out, json_path=args.json, quiet=args.quiet,
                      overwrite=getattr(args, "overwrite", False))
     return data["exit_code"]
@@ -477,6 +480,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--picture", nargs="?", const="", metavar="FIELD",
                    help="at the end, a PNG of the deformed body coloured by FIELD (default von_mises) in the output folder")
     p.add_argument("--plot", action="store_true", help="the per-step history curves as summary.png in the output folder")
+    p.add_argument("--view", metavar="VIEW", help="the picture's camera: top, bottom, front, back, left, right, or "
+                   "AZIMUTH,ELEVATION in degrees (overrides [output] view; default -60,20)")
     p.add_argument("--threads", metavar="N", help="assembly threads (overrides [solver] threads and "
                    "$TENSORMASS_THREADS; default: every core); results do not depend on it")
     p.set_defaults(run=cmd_run)

@@ -47,13 +47,14 @@ import numpy as np
 
 from ... import elements as _types
 from ..base.errors import TensormassError
+from ..scene.parser import DEFAULT_VIEW, VIEWS, view_angles
 from .output import OutputError, check_png_path
 from ..base.files import write_bytes_atomic
 
-__all__ = ["write_picture", "picture_of_simulation", "render_picture", "pick_field", "auto_scale", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW"]
+__all__ = ["write_picture", "picture_of_simulation", "render_picture", "check_picture", "pick_field", "auto_scale",
+           "round_length", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW", "VIEWS"]
 
 EDGE_LIMIT = 6000                 # mesh edges drawn up to this many visible faces (2D: cells)
-DEFAULT_VIEW = (20.0, -60.0)      # elevation, azimuth in degrees
 # Faces culled when their normal points away from the viewer by more than this (cosine): a
 # little beyond edge-on, because a curved (quadratic) face whose mean normal points slightly
 # away can still show part of itself at the silhouette; these are painted first (farthest).
@@ -67,7 +68,7 @@ _BACKGROUND = "white"
 def write_picture(path, mesh, points, displacement, values, field_name: str = "displacement", unit: str = "",
                   scale: float = 1.0, title: str | None = None, step=None, time=None,
                   size=(1000, 640), cmap: str = "viridis", clim=None, view=None, edges=None,
-                  shade: bool = True, backend: str = "auto") -> str:
+                  shade: bool = True, backend: str = "auto", clip=None, load=None) -> str:
     """Write a PNG of the deformed body coloured by a field; returns the back end used.
 
     points: reference positions (n, dim) (None: mesh.points). displacement: (n, dim) or the
@@ -76,12 +77,16 @@ def write_picture(path, mesh, points, displacement, values, field_name: str = "d
     as Simulation.fields() returns them (the nodal one is drawn when both have the name), or
     None for |displacement|. scale: a number, or "auto" (auto_scale: the largest displacement
     drawn at about a tenth of the body's size, never less than as it is). size: (width,
-    height) in pixels. clim: (low, high) of the colour bar (default: the field's range).
+    height) in pixels. clim: (low, high) of the colour bar (default: the field's range). view: a
+    name of VIEWS ("top", "front", ...) or (azimuth, elevation) in degrees (3D; default
+    DEFAULT_VIEW). clip: ((point), (normal)): only the cells whose rest centre (mean of their nodes
+    at `points`) lies on the side the normal points away from are drawn, with the faces the cut
+    exposes. load: (k, n) titles a static run "load k/n" (time is then left out).
     """
     target = _check_path(path)
     image = render_picture(mesh, points, displacement, values, field_name, unit=unit, scale=scale,
                            title=title, step=step, time=time, size=size, cmap=cmap, clim=clim,
-                           view=view, edges=edges, shade=shade, backend=backend)
+                           view=view, edges=edges, shade=shade, backend=backend, clip=clip, load=load)
     png, used = image
     try:
         write_bytes_atomic(target, png)
@@ -94,9 +99,14 @@ def picture_of_simulation(sim, path, field: str = "von_mises", scale="auto", tit
                           **options) -> str:
     """write_picture for a Simulation at its current state: its mesh (the current one after
     refinement), its displacement, and the field from sim.fields([field]) with the unit that
-    runtime.physics.fields.FIELDS gives it ("displacement" needs no fields). Returns the back end used."""
+    runtime.physics.fields.FIELDS gives it ("displacement" needs no fields). The scene's [output]
+    view and clip apply unless given; a static run is titled by its load ("load k/n") rather than
+    its time. Returns the back end used."""
     mesh = sim.model.mesh
     u = sim.displacement
+    options = {**_scene_options(sim.model), **options}
+    if "load" not in options and step is not None and _static(sim.model):
+        options["load"], time = (step, getattr(sim.model.solver, "steps", step)), None
     unit = options.pop("unit", None)
     if field in ("displacement", "u"):
         values, unit = None, "m" if unit is None else unit
@@ -117,12 +127,34 @@ def picture_of_simulation(sim, path, field: str = "von_mises", scale="auto", tit
                          step=step, time=time, **options)
 
 
+def _scene_options(model) -> dict:
+    """The picture options of a model's scene ([output] view, clip) that are set."""
+    out = getattr(model, "output", None)
+    return {k: getattr(out, k) for k in ("view", "clip") if getattr(out, k, None) is not None}
+
+
+def _static(model) -> bool:
+    from ..base import integrator_kinds
+    kind = getattr(getattr(model, "solver", None), "kind", None)
+    return kind in integrator_kinds.KINDS and not integrator_kinds.get(kind).dynamic
+
+
+def check_picture(model, field: str = "displacement") -> None:
+    """Refuse (TensormassError), writing nothing, a picture of this model that could not be drawn:
+    its mesh with the scene's view and clip is rendered at rest, in memory (a clip that keeps no
+    cell, a plane of the wrong dimension, a mesh with nothing to draw)."""
+    mesh = model.mesh
+    render_picture(mesh, mesh.points, np.zeros_like(mesh.points), None, "displacement", unit="m", size=(160, 120),
+                   backend="matplotlib", **_scene_options(model))
+
+
 def render_picture(mesh, points, displacement, values, field_name: str = "displacement", unit: str = "",
                    scale: float = 1.0, title=None, step=None, time=None, size=(1000, 640), cmap="viridis",
-                   clim=None, view=None, edges=None, shade=True, backend="auto") -> tuple:
+                   clim=None, view=None, edges=None, shade=True, backend="auto", clip=None, load=None) -> tuple:
     """(PNG bytes, back end used): write_picture without the file."""
-    scene = _prepare(mesh, points, displacement, values, field_name, unit, scale, size, cmap, clim, view)
-    scene.update(title=title, step=step, time=time, edges=edges, shade=bool(shade))
+    scene = _prepare(mesh, points, displacement, values, field_name, unit, scale, size, cmap, clim, view, clip)
+    scene.update(title=title, step=step, time=None if load is not None else time, edges=edges, shade=bool(shade),
+                 load=_load(load))
     choice = _backend(backend)
     if choice in ("auto", "pyvista") and pyvista_usable():
         try:
@@ -187,7 +219,7 @@ def _finite(name: str, arr: np.ndarray) -> None:
         raise TensormassError(f"picture: {name} has NaN or Inf at {bad.size} of {len(arr)} rows, first {int(bad[0])}")
 
 
-def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, cmap, clim, view) -> dict:
+def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, cmap, clim, view, clip=None) -> dict:
     """Everything both back ends need, checked: deformed points, polygons, values, labels."""
     n, dim = mesh.n_points, mesh.dim
     X = mesh.points if points is None else np.asarray(points, dtype=np.float64)
@@ -236,13 +268,16 @@ def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, 
     if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1e-300):   # a constant field: a colour bar around it
         pad = max(abs(lo) * 1e-3, 1e-12)
         lo, hi = lo - pad, hi + pad
-    elev, azim = DEFAULT_VIEW if view is None else _view(view)
-    polys, cells = _polygons(mesh)
+    azim, elev = DEFAULT_VIEW if view is None else _view(view)
+    kept = _clip(mesh, X, clip)
+    polys, cells, two_sided = _polygons(mesh, kept)
     if not polys:
+        if kept is not None and _polygons(mesh, None)[0]:
+            raise TensormassError(f"picture: clip {_fmt_clip(clip)} removes every cell; nothing is left to draw")
         raise TensormassError("picture: the mesh has no 2D or 3D cells to draw")
     return dict(mesh=mesh, dim=dim, x=X + scale * u, values=arr, where=where, label=label, unit=str(unit or ""),
-                scale=scale, width=width, height=height, cmap=colormap, clim=(lo, hi), view=(elev, azim),
-                polys=polys, cells=cells, moved=bool(np.any(u)))
+                scale=scale, width=width, height=height, cmap=colormap, clim=(lo, hi), view=(azim, elev),
+                polys=polys, cells=cells, two_sided=two_sided, moved=bool(np.any(u)), clipped=kept is not None)
 
 
 def auto_scale(points, displacement, target: float = 0.1) -> float:
@@ -261,13 +296,65 @@ def auto_scale(points, displacement, target: float = 0.1) -> float:
 
 
 def _view(view):
+    """(azimuth, elevation) in degrees of a view name or pair (the scene's rules: runtime.scene.parser)."""
+    if isinstance(view, np.ndarray):
+        view = view.tolist()
+    if isinstance(view, tuple):
+        view = list(view)
+    if isinstance(view, list):
+        view = [float(v) if isinstance(v, (np.floating, np.integer)) else v for v in view]
+    return view_angles(view, "picture: view")
+
+
+def _fmt_clip(clip) -> str:
+    return str([[float(v) for v in part] for part in clip])
+
+
+def _clip(mesh, X, clip):
+    """The cells kept by a clip plane (bool per cell, global order), or None without one."""
+    if clip is None:
+        return None
     try:
-        elev, azim = (float(v) for v in view)
+        point, normal = (np.asarray(part, dtype=np.float64) for part in clip)
     except (TypeError, ValueError):
-        raise TensormassError(f"picture: view must be (elevation, azimuth) in degrees, got {view!r}") from None
-    if not (math.isfinite(elev) and math.isfinite(azim)):
-        raise TensormassError(f"picture: view must be finite, got {view!r}")
-    return elev, azim
+        raise TensormassError(f"picture: clip must be [[point...], [normal...]], got {clip!r}") from None
+    if point.shape != (mesh.dim,) or normal.shape != (mesh.dim,):
+        raise TensormassError(f"picture: clip point and normal need {mesh.dim} components each (the mesh is "
+                              f"{mesh.dim}D), got {clip!r}")
+    if not (np.isfinite(point).all() and np.isfinite(normal).all()) or not np.any(normal):
+        raise TensormassError(f"picture: clip needs a finite point and a non-zero normal, got {clip!r}")
+    kept = []
+    for b in mesh.blocks:
+        centre = X[b.cells].mean(axis=1) if len(b) else np.zeros((0, mesh.dim))
+        kept.append((centre - point) @ normal <= 0.0)
+    return np.concatenate(kept) if kept else np.zeros(0, bool)
+
+
+def _load(load):
+    """(k, n) of a static run's load step, checked, or None."""
+    if load is None:
+        return None
+    try:
+        k, n = (int(v) for v in load)
+    except (TypeError, ValueError):
+        raise TensormassError(f"picture: load must be (step, steps), got {load!r}") from None
+    if n < 1 or not 0 <= k <= n:
+        raise TensormassError(f"picture: load must be (step, steps) with 0 <= step <= steps, got {load!r}")
+    return k, n
+
+
+def round_length(length: float) -> float:
+    """The largest 1, 2 or 5 times a power of ten that is at most `length` (> 0)."""
+    power = 10.0 ** math.floor(math.log10(length))
+    return float(max(m for m in (1.0, 2.0, 5.0) if m * power <= length * (1 + 1e-12)) * power)
+
+
+def _length_text(length: float) -> str:
+    """A length in metres as a person writes it: 2 m, 50 mm, 200 um."""
+    for factor, unit in ((1.0, "m"), (1e-3, "mm"), (1e-6, "\u00b5m")):
+        if length >= factor * (1 - 1e-9):
+            return f"{length / factor:.6g} {unit}"
+    return f"{length:.3g} m"
 
 
 def _outline(type_name: str, n_nodes: int) -> list:
@@ -288,46 +375,47 @@ def _outline(type_name: str, n_nodes: int) -> list:
     return out
 
 
-def _polygons(mesh):
-    """Polygons to draw: [node id arrays (outline order)] and the global cell id of each.
+def _polygons(mesh, kept=None):
+    """Polygons to draw: [(outline node ids, all node ids)], the global cell id of each, and
+    whether each is two-sided (a shell's cell: seen from both sides, never culled).
 
-    3D: the boundary faces of the volume cells; 2D: the area cells. Each polygon is returned
-    with all nodes of its face (or cell) after the outline, in `nodes` of the same entry:
-    (outline, all_nodes)."""
-    offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])])
-    polys, cells = [], []
+    3D: the boundary faces of the kept volume cells (those used by exactly one kept cell: the
+    body's surface and, with a clip, the faces the cut exposes) and the kept 2D cells (shells,
+    triangles in 3D) themselves; 2D: the kept area cells. kept: bool per cell, None for all."""
+    offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
+    polys, cells, two_sided = [], [], []
     if mesh.dim == 3:
-        from ..mesh.faces import boundary_faces
-        by_count = {}
-        for b in mesh.blocks:
-            el = _types.get(b.type)
-            if el.dim == 3:
-                by_count[b.type] = {len(f.nodes): f.type for f in el.faces}
-        solid = [i for i, b in enumerate(mesh.blocks) if b.type in by_count]
-        if not solid:
-            return [], np.zeros(0, np.int64)
-        outlines = {}
-        for block, local, nodes in boundary_faces(mesh):
-            ftype = by_count[mesh.blocks[block].type].get(len(nodes))
-            key = (ftype, len(nodes))
-            if key not in outlines:
-                outlines[key] = _outline(ftype, len(nodes)) if ftype else list(range(len(nodes)))
-            nodes = np.asarray(nodes, dtype=np.int64)
-            polys.append((nodes[outlines[key]], nodes))
-            cells.append(offsets[block] + local)
-    else:
-        for bi, b in enumerate(mesh.blocks):
-            el = _types.get(b.type)
-            if el.dim != 2:
-                continue
-            order = _outline(b.type, el.n_nodes)
-            for j, row in enumerate(b.cells):
+        from ..mesh.faces import face_table
+        ft = face_table(mesh)
+        if len(ft.cell):
+            mine = np.ones(len(ft.cell), bool) if kept is None else kept[ft.cell]
+            users = np.bincount(ft.group, weights=mine.astype(np.float64), minlength=len(ft.count))
+            outlines = {}
+            for r in np.flatnonzero(mine & (users[ft.group] == 1)):
+                bi = int(ft.block[r])
+                el = _types.get(mesh.blocks[bi].type)
+                face = el.faces[int(ft.lface[r])]
+                key = (mesh.blocks[bi].type, int(ft.lface[r]))
+                if key not in outlines:
+                    outlines[key] = _outline(face.type, len(face.nodes)) if face.type else list(range(len(face.nodes)))
+                nodes = np.asarray(mesh.blocks[bi].cells[int(ft.local[r]), list(face.nodes)], dtype=np.int64)
+                polys.append((nodes[outlines[key]], nodes))
+                cells.append(int(ft.cell[r]))
+                two_sided.append(False)
+    for bi, b in enumerate(mesh.blocks):
+        el = _types.get(b.type)
+        if el.dim != 2:
+            continue
+        order = _outline(b.type, el.n_nodes)
+        for j, row in enumerate(b.cells):
+            if kept is None or kept[offsets[bi] + j]:
                 polys.append((row[order], row))
                 cells.append(offsets[bi] + j)
-    return polys, np.asarray(cells, dtype=np.int64)
+                two_sided.append(mesh.dim == 3)
+    return polys, np.asarray(cells, dtype=np.int64), np.asarray(two_sided, dtype=bool)
 
 
-def _frame(elev: float, azim: float):
+def _frame(azim: float, elev: float):
     """Right, up and toward-the-viewer unit vectors of an orthographic view (matplotlib's angles)."""
     e, a = math.radians(elev), math.radians(azim)
     toward = np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
@@ -339,7 +427,10 @@ def _frame(elev: float, azim: float):
 def _title(scene) -> str:
     head = scene["title"] or ""
     when = []
-    if scene["step"] is not None:
+    if scene.get("load") is not None:
+        k, n = scene["load"]
+        when.append(f"load {k}/{n}")
+    elif scene["step"] is not None:
         when.append(f"step {scene['step']}")
     if scene["time"] is not None:
         when.append(f"t = {float(scene['time']):.6g} s")
@@ -348,6 +439,8 @@ def _title(scene) -> str:
     unit = f" [{scene['unit']}]" if scene["unit"] else ""
     second = f"{scene['label']}{unit} on the deformed body (displacement x {scene['scale']:g})" if scene["moved"] \
         else f"{scene['label']}{unit} on the body (no displacement)"
+    if scene.get("clipped"):
+        second += ", clipped"
     return f"{first}\n{second}" if first else second
 
 
@@ -441,7 +534,9 @@ def _render_matplotlib(scene) -> bytes:
         normals = np.array([_newell(x[outline]) for outline, _ in polys])
         length = np.linalg.norm(normals, axis=1)
         facing = normals @ toward
-        keep = np.flatnonzero(facing > _CULL * np.maximum(length, 1e-300))
+        two = scene["two_sided"]
+        facing[two] = np.abs(facing[two])          # a shell is seen from either side
+        keep = np.flatnonzero(two | (facing > _CULL * np.maximum(length, 1e-300)))
         mean_depth = np.array([depth[polys[i][0]].mean() for i in keep])
         keep = keep[np.argsort(mean_depth, kind="stable")]          # back to front
         if scene["shade"]:
@@ -466,9 +561,12 @@ def _render_matplotlib(scene) -> bytes:
     ax.add_artist(body)
     shown = xy[np.unique(np.concatenate([polys[i][0] for i in keep]))]
     lo, hi = shown.min(axis=0), shown.max(axis=0)
-    pad = 0.04 * max(float((hi - lo).max()), 1e-300)
+    span = max(float((hi - lo).max()), 1e-300)
+    pad = 0.04 * span
+    band = 0.12 * span                               # below the body: the length scale
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_ylim(lo[1] - pad - band, hi[1] + pad)
+    _scale_bar(ax, lo, hi, pad, band, span)
 
     cax = fig.add_axes((0.83, 0.10, 0.025, 0.68))
     bar = fig.colorbar(ScalarMappable(norm=Normalize(*scene["clim"]), cmap=scene["cmap"]), cax=cax)
@@ -479,6 +577,38 @@ def _render_matplotlib(scene) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100, facecolor=_BACKGROUND, metadata={"Software": None})
     return buf.getvalue()
+
+
+def _scale_bar(ax, lo, hi, pad, band, span) -> None:
+    """A bar of a round length (1, 2 or 5 times a power of ten, about a quarter of the body's
+    width on the screen) under the body's right end, labelled with its length; orthographic
+    projection: a length in the picture's plane is drawn at its true size."""
+    width = float(hi[0] - lo[0])
+    length = round_length(0.25 * (width if width > 0.05 * span else span))
+    x1 = float(hi[0])
+    x0 = x1 - length
+    y = float(lo[1]) - pad - 0.35 * band
+    tick = 0.12 * band
+    ax.plot([x0, x1], [y, y], color="black", lw=2.0, solid_capstyle="butt", zorder=5)
+    ax.plot([x0, x0], [y - tick, y + tick], color="black", lw=1.2, zorder=5)
+    ax.plot([x1, x1], [y - tick, y + tick], color="black", lw=1.2, zorder=5)
+    ax.text(0.5 * (x0 + x1), y - 1.6 * tick, _length_text(length), ha="center", va="top", fontsize=9, zorder=5)
+
+
+def _pyvista_scale_bar(plotter, x, polys, right, up, toward) -> None:
+    """The length scale of the matplotlib picture as a pyvista ruler under the body (text if the
+    pyvista at hand has no ruler)."""
+    shown = x[np.unique(np.concatenate([outline for outline, _ in polys]))]
+    r, u, d = shown @ right, shown @ up, shown @ toward
+    span = max(float(np.ptp(r)), float(np.ptp(u)), 1e-300)
+    width = float(np.ptp(r))
+    length = round_length(0.25 * (width if width > 0.05 * span else span))
+    end = r.max() * right + (u.min() - 0.08 * span) * up + d.mean() * toward
+    try:
+        plotter.add_ruler(tuple(end - length * right), tuple(end), title=_length_text(length), show_labels=False,
+                          number_minor_ticks=0, font_size_factor=0.6)
+    except (AttributeError, TypeError):
+        plotter.add_text(f"scale: {_length_text(length)}", position="lower_right", font_size=9, color="black")
 
 
 def _newell(p: np.ndarray) -> np.ndarray:
@@ -552,19 +682,16 @@ def _pyvista():
 
 def _render_pyvista(scene) -> bytes:
     pv = _pyvista()
-    from ..mesh.io import to_meshio
-    mesh, dim = scene["mesh"], scene["dim"]
-    m = to_meshio(mesh, pad_to_3d=True)
+    dim = scene["dim"]
     x = scene["x"] if dim == 3 else np.column_stack([scene["x"], np.zeros(len(scene["x"]))])
-    m.points = x
-    m.cell_data = {}
+    # the polygons the matplotlib path draws (surface, clip's cut faces, shells), as one PolyData
+    faces = np.concatenate([np.concatenate([[len(outline)], outline]) for outline, _ in scene["polys"]])
+    surface = pv.PolyData(np.ascontiguousarray(x, dtype=np.float64), faces.astype(np.int64))
     name = _colorbar_label(scene)
-    grid = pv.from_meshio(m)
     if scene["where"] == "point":
-        grid.point_data[name] = scene["values"]
+        surface.point_data[name] = scene["values"]
     else:
-        grid.cell_data[name] = scene["values"]
-    surface = grid.extract_surface(algorithm="dataset_surface") if dim == 3 else grid
+        surface.cell_data[name] = scene["values"][scene["cells"]]
     plotter = pv.Plotter(off_screen=True, window_size=(scene["width"], scene["height"]))
     try:
         plotter.set_background(_BACKGROUND)
@@ -585,7 +712,9 @@ def _render_pyvista(scene) -> bytes:
             plotter.camera.up = tuple(up)
             plotter.add_axes(color="black")
         else:
+            right, up, toward = np.eye(3)
             plotter.view_xy()
+        _pyvista_scale_bar(plotter, x, scene["polys"], right, up, toward)
         plotter.reset_camera()
         plotter.camera.zoom(1.05)
         img = plotter.screenshot(return_img=True)

@@ -45,7 +45,7 @@ _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass", "rho_inf", "threads", "preserve_volume")
 _PROBE = ("name", "point", "region", "box")
-_OUTPUT = ("dir", "every", "fields", "picture", "plot")
+_OUTPUT = ("dir", "every", "fields", "picture", "plot", "view", "clip")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
 ADAPT_CRITERIA = ("R_L", "R_A", "R_M", "R_HM", "R_S", "rotation")
 ADAPT_ACTIONS = ("switch_law", "refine")
@@ -764,10 +764,59 @@ class Parser:
             out.picture = picture_field(t["picture"], "output.picture")
         if "plot" in t:
             out.plot = self.boolean(t["plot"], "output.plot")
+        if "view" in t:                   # the picture's camera (runtime.run.picture)
+            out.view = view_angles(t["view"], "output.view")
+        if "clip" in t:                   # the picture's cut-away: the cells on one side of a plane
+            clip = t["clip"]
+            if not isinstance(clip, list) or len(clip) != 2:
+                raise SceneError(f"output.clip: expected [[point...], [normal...]] (the picture keeps the cells on "
+                                 f"the side the normal points away from), got {_fmt(clip)}")
+            point = self.vector(clip[0], "output.clip[0]")
+            normal = self.vector(clip[1], "output.clip[1]", dim=len(point))
+            if not any(normal):
+                raise SceneError("output.clip[1]: the normal must not be zero")
+            out.clip = (point, normal)
         return out
 
 
 PICTURE_DEFAULT = "von_mises"
+
+# Named cameras of the picture: (azimuth, elevation) in degrees, matplotlib's angles (the view
+# direction from the body to the camera: cos(el) (cos(az), sin(az)), sin(el)). Each keeps an axis up
+# or, seen from above or below, x to the right.
+VIEWS = {"top": (-90.0, 90.0), "bottom": (-90.0, -90.0), "front": (-90.0, 0.0), "back": (90.0, 0.0),
+         "left": (180.0, 0.0), "right": (0.0, 0.0)}
+DEFAULT_VIEW = (-60.0, 20.0)            # from the front right, above
+
+
+def view_angles(value, key: str) -> tuple:
+    """[output] view / run --view: a name of VIEWS or [azimuth, elevation] in degrees -> (azimuth, elevation)."""
+    if isinstance(value, str):
+        if value not in VIEWS:
+            raise SceneError(f"{key}: unknown view {value!r}; expected one of {', '.join(VIEWS)} or "
+                             "[azimuth, elevation] in degrees")
+        return VIEWS[value]
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SceneError(f"{key}: expected a view name ({', '.join(VIEWS)}) or [azimuth, elevation] in degrees, "
+                         f"got {_fmt(value)}")
+    angles = tuple(Parser.number(v, f"{key}[{i}]") for i, v in enumerate(value))
+    if not -90.0 <= angles[1] <= 90.0:
+        raise SceneError(f"{key}[1]: the elevation must be within [-90, 90] degrees, got {_fmt(angles[1])}")
+    return angles
+
+
+def view_text(text: str, key: str = "--view") -> tuple:
+    """run --view: a view name, or "AZIMUTH,ELEVATION" in degrees -> (azimuth, elevation)."""
+    if "," not in text and text.strip() in VIEWS:
+        return VIEWS[text.strip()]
+    try:
+        value = [float(p) for p in text.split(",")]
+        if len(value) != 2:
+            raise ValueError
+    except ValueError:
+        raise SceneError(f"{key}: expected a view name ({', '.join(VIEWS)}) or AZIMUTH,ELEVATION in degrees, "
+                         f"got {text!r}") from None
+    return view_angles(value, key)
 
 
 def picture_field(value, key: str) -> str | None:

@@ -114,7 +114,8 @@ def test_scale_moves_the_body(tmp_path):
         path = tmp_path / f"s{scale}.png"
         path.write_bytes(png)
         _, rgb = _image(path)
-        ink = (rgb[int(0.16 * SIZE[1]):int(0.84 * SIZE[1]), :int(0.79 * SIZE[0])] != 255).any(axis=2)
+        area = rgb[int(0.16 * SIZE[1]):int(0.84 * SIZE[1]), :int(0.79 * SIZE[0])]
+        ink = np.ptp(area, axis=2) > 20                       # coloured: the body (the length scale is black)
         rows, cols = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
         aspect.append((rows[-1] - rows[0]) / (cols[-1] - cols[0]))
     # the straight bar is 0.2 high for 1 long; bent by 5 * 0.05 at the tip it spans ~0.45
@@ -228,3 +229,182 @@ def test_picture_of_a_simulation(tmp_path):
     with pytest.raises(TensormassError, match="computes no fields"):
         picture_of_simulation(older, tmp_path / "no.png", "von_mises", backend="matplotlib")
     assert not (tmp_path / "no.png").exists()
+
+
+# -- camera, clip, length scale, titles, shells -------------------------------------------------------
+def _bar3d():
+    mesh = generate_bar(size=(0.08, 0.06, 0.03), cells=(4, 3, 2), element="tetra10")
+    u = np.zeros_like(mesh.points)
+    u[:, 2] = -0.5 * mesh.points[:, 0] ** 2
+    return mesh, u
+
+
+def _pixels(png, tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes(png)
+    return _image(path)[1]
+
+
+def test_views_show_the_body_from_where_they_say(tmp_path):
+    """Named views and angles render different pictures; a name is its angles; the default is (-60, 20)."""
+    from tensormass.runtime.run.picture import DEFAULT_VIEW, VIEWS
+    mesh = generate_bar(size=(0.08, 0.06, 0.03), cells=(3, 2, 1), element="hexahedron")
+    u = np.zeros_like(mesh.points)
+    u[:, 2] = -0.5 * mesh.points[:, 0] ** 2
+    x, size = mesh.points[:, 0], (320, 220)
+
+    def draw(view):
+        return render_picture(mesh, None, u, x, "x", size=size, view=view, shade=False, backend="matplotlib")[0]
+
+    views = {"top": "top", "bottom": "bottom", "front": "front", "angles": [30.0, -20.0], "default": None}
+    pngs = {name: draw(view) for name, view in views.items()}
+    shots = {name: _pixels(png, tmp_path, f"{name}.png") for name, png in pngs.items()}
+    names = list(shots)
+    for i, a in enumerate(names):
+        _check_picture(tmp_path / f"{a}.png", size=size, extremes=False)
+        for b in names[i + 1:]:
+            differ = (shots[a] != shots[b]).any(axis=2).mean()
+            assert differ > 0.02, f"views {a} and {b} give the same picture ({differ:.1%} of the pixels differ)"
+    assert pngs["top"] == draw(list(VIEWS["top"])) and pngs["default"] == draw(list(DEFAULT_VIEW))
+    assert DEFAULT_VIEW == (-60.0, 20.0)
+    # from the top, x runs to the right: the body's colours (x) grow from left to right
+    h, w = int(0.84 * size[1]) - int(0.16 * size[1]), int(0.79 * size[0]) - int(0.02 * size[0])
+    body = _body(shots["top"]).reshape(h, w, 3)
+    left, right = body[:, : w // 3], body[:, w // 3:]
+    assert np.median(_colormap_positions(left[np.ptp(left, axis=2) > 20])) < \
+        np.median(_colormap_positions(right[np.ptp(right, axis=2) > 20]))
+
+
+def test_a_clip_plane_shows_the_inside(tmp_path):
+    """A clip keeps the cells on the side the normal points away from, with the faces the cut exposes."""
+    from tensormass.runtime.run import picture
+    mesh, u = _bar3d()
+    x = mesh.points[:, 0]
+    whole = render_picture(mesh, None, u, x, "x", size=SIZE, view="front", shade=False, backend="matplotlib")[0]
+    plane = [[0.04, 0.02, 0.015], [0.0, -1.0, 0.0]]          # the front third (y < 0.02) is cut away
+    clipped = render_picture(mesh, None, u, x, "x", size=SIZE, view="front", clip=plane, shade=False,
+                             backend="matplotlib")[0]
+    a, b = _pixels(whole, tmp_path, "whole.png"), _pixels(clipped, tmp_path, "clipped.png")
+    assert (a != b).any(axis=2).mean() > 0.01
+    _check_picture(tmp_path / "clipped.png")
+    X = mesh.points
+    polys, cells, _ = picture._polygons(mesh, picture._clip(mesh, X, plane))
+    centres = np.concatenate([X[blk.cells].mean(axis=1) for blk in mesh.blocks])
+    assert np.all(centres[cells][:, 1] > 0.02)                # only kept cells are drawn
+    faces_at_cut = [p for p, _ in polys if np.allclose(X[p][:, 1], 0.02)]
+    assert len(faces_at_cut) == 2 * 4 * 2                     # the exposed cut: 4 x 2 hexahedra, 2 triangles each
+    with pytest.raises(TensormassError, match=r"clip .* removes every cell"):
+        render_picture(mesh, None, u, x, "x", clip=[[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]], backend="matplotlib")
+    with pytest.raises(TensormassError, match="need 3 components each"):
+        render_picture(mesh, None, u, x, "x", clip=[[0.0, 0.0], [0.0, 1.0]], backend="matplotlib")
+    with pytest.raises(TensormassError, match="non-zero normal"):
+        render_picture(mesh, None, u, x, "x", clip=[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], backend="matplotlib")
+
+
+def test_the_length_scale_is_a_round_length_drawn_to_scale(tmp_path):
+    """From the top of a 1 m wide body, the bar is 0.2 m: a fifth of the body's width in pixels."""
+    from tensormass.runtime.run.picture import _length_text, round_length
+    assert [round_length(v) for v in (0.25, 0.019, 7.0, 1.0)] == [0.2, 0.01, 5.0, 1.0]
+    assert [_length_text(v) for v in (2.0, 0.02, 5e-5)] == ["2 m", "20 mm", "50 \u00b5m"]
+    mesh = generate_bar(size=(1.0, 0.3), cells=(5, 2), element="quad")
+    rgb = _pixels(render_picture(mesh, None, None, mesh.points[:, 0], "x", size=(800, 500), edges=False,
+                                 backend="matplotlib")[0], tmp_path, "bar.png")
+    area = rgb[int(0.16 * 500):, int(0.12 * 800): int(0.79 * 800)]   # no title, colour bar or axis triad
+    body_cols = np.flatnonzero((np.ptp(area, axis=2) > 20).any(axis=0))
+    black_rows = (area.max(axis=2) < 40).sum(axis=1)
+    row = int(black_rows.argmax())                             # the bar: the longest black row
+    bar_cols = np.flatnonzero(area[row].max(axis=1) < 40)
+    ratio = (bar_cols[-1] - bar_cols[0]) / (body_cols[-1] - body_cols[0])
+    assert abs(ratio - 0.2) < 0.02, ratio
+    assert row > np.flatnonzero((np.ptp(area, axis=2) > 20).any(axis=1)).max()      # under the body
+
+
+def test_static_runs_are_titled_by_load(tmp_path):
+    from types import SimpleNamespace
+
+    from tensormass.runtime.run import picture
+    mesh = generate_bar(size=(1.0, 0.2, 0.2), cells=(2, 1, 1), element="hexahedron")
+    got = {}
+    for kind in ("static", "implicit_euler"):
+        model = SimpleNamespace(mesh=mesh, name="bar", solver=SimpleNamespace(kind=kind, steps=4),
+                                output=SimpleNamespace(view="top", clip=None))
+        sim = SimpleNamespace(model=model, displacement=_bent(mesh, 0.01))
+        seen = {}
+        original = picture.render_picture
+
+        def spy(*args, **kw):
+            seen.update(kw)
+            return original(*args, **kw)
+
+        picture.render_picture = spy
+        try:
+            picture.picture_of_simulation(sim, tmp_path / f"{kind}.png", "displacement", step=4, time=1.0,
+                                          size=SIZE, backend="matplotlib")
+        finally:
+            picture.render_picture = original
+        got[kind] = seen
+    assert got["static"]["load"] == (4, 4) and got["static"]["time"] is None and got["static"]["view"] == "top"
+    assert got["implicit_euler"].get("load") is None and got["implicit_euler"]["time"] == 1.0
+    base = dict(title="organ", step=4, time=None, unit="Pa", label="von_mises", scale=5.0, moved=True)
+    assert picture._title({**base, "load": (4, 4)}).splitlines()[0] == "organ: load 4/4"
+    assert picture._title({**base, "time": 0.5, "step": 50}).splitlines()[0] == "organ: step 50, t = 0.5 s"
+
+
+def test_a_shell_is_drawn_from_either_side(tmp_path):
+    """Shell triangles in 3D (no volume cells): the deformed surface, seen from above and below."""
+    from tensormass.runtime.scene.scene import Scene
+    scene = Scene.from_string('[mesh]\ngenerate = "plate"\nsize = [1.0, 1.0]\ncells = [6, 6]\n'
+                              '[[material]]\nlaw = "cst_dkt"\nE = 1e7\nnu = 0.3\nthickness = 0.01\n'
+                              '[[fixed]]\nbox = [[-1, -1, -1], [1e-9, 2, 1]]\n', load_mesh=False)
+    mesh = scene.load_mesh()
+    assert mesh.dim == 3 and all(b.type == "shell" for b in mesh.blocks)
+    u = np.zeros_like(mesh.points)
+    u[:, 2] = 0.3 * mesh.points[:, 0] ** 2
+    for view in (None, "bottom"):
+        path = tmp_path / f"shell_{view}.png"
+        write_picture(path, mesh, None, u, None, "displacement", unit="m", size=SIZE, shade=False,
+                      view=view, backend="matplotlib")
+        _check_picture(path, extremes=False)
+
+
+def test_bad_views_and_clips_are_scene_errors():
+    from tensormass.runtime.base.errors import SceneError
+    from tensormass.runtime.scene.parser import view_text
+    from tensormass.runtime.scene.scene import Scene
+    base = ('[mesh]\ngenerate = "bar"\nsize = [1.0, 0.2, 0.2]\ncells = [2, 1, 1]\n'
+            '[[material]]\nlaw = "stvk"\nE = 1e6\nnu = 0.3\n[[fixed]]\nbox = [[-1, -1, -1], [1e-9, 1, 1]]\n[output]\n')
+    ok = Scene.from_string(base + 'view = "top"\nclip = [[0.5, 0, 0], [1, 0, 0]]\n', load_mesh=False).output
+    assert ok.view == (-90.0, 90.0) and ok.clip == ((0.5, 0.0, 0.0), (1.0, 0.0, 0.0))
+    assert Scene.from_string(base + "view = [30, -20]\n", load_mesh=False).output.view == (30.0, -20.0)
+    for text, message in [
+        ('view = "above"', "output.view: unknown view 'above'; expected one of top, bottom, front, back, left, right"),
+        ("view = [30, 95]", r"output.view\[1\]: the elevation must be within \[-90, 90\] degrees, got 95"),
+        ("view = [30]", "output.view: expected a view name"),
+        ('view = ["a", 1]', r"output.view\[0\]: expected a number"),
+        ("clip = [[0, 0, 0]]", r"output.clip: expected \[\[point...\], \[normal...\]\]"),
+        ("clip = [[0, 0, 0], [0, 0, 0]]", r"output.clip\[1\]: the normal must not be zero"),
+        ("clip = [[0, 0], [1, 0]]", r"output.clip\[0\]: expected 3 components, got 2"),
+    ]:
+        with pytest.raises(SceneError, match=message):
+            Scene.from_string(base + text + "\n", load_mesh=False)
+    assert view_text("front") == (-90.0, 0.0) and view_text("-45,30") == (-45.0, 30.0)
+    with pytest.raises(SceneError, match="--view: expected a view name"):
+        view_text("-45;30")
+
+
+def test_run_view_argument_reaches_the_scene(tmp_path, monkeypatch):
+    """run --view overrides [output] view (one argument passed through to the scene)."""
+    import argparse
+
+    from tensormass.apps import commands
+    seen = {}
+    monkeypatch.setattr(commands, "run_scene", lambda scene, **kw: seen.update(view=scene.output.view) or
+                        {"exit_code": 0})
+    scene = tmp_path / "s.toml"
+    scene.write_text('[mesh]\ngenerate = "bar"\nsize = [1.0, 0.2, 0.2]\ncells = [2, 1, 1]\n'
+                     '[[material]]\nlaw = "stvk"\nE = 1e6\nnu = 0.3\n[[fixed]]\nbox = [[-1, -1, -1], [1e-9, 1, 1]]\n')
+    parser = argparse.ArgumentParser()
+    commands.add_commands(parser.add_subparsers())
+    for argv, want in ((["--view", "back"], (90.0, 0.0)), (["--view=-30,10"], (-30.0, 10.0)), ([], None)):
+        args = parser.parse_args(["run", str(scene), *argv])
+        assert args.run(args) == 0 and seen["view"] == want
