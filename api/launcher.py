@@ -1,5 +1,6 @@
 """The `tensormass` console script: Ctrl-C while the command line is still importing gives the
-same one line and exit code 130 as during a run (the imports of sympy and numba take ~1 s)."""
+same one line and exit code 130 as during a run (a command imports sympy, numba and the runtime
+when it runs: 2 to 5 s on 2 shared cores; the parser alone, apps.cli, about 0.3 s)."""
 from __future__ import annotations
 
 import sys
