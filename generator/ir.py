@@ -21,6 +21,7 @@ from . import GENERATOR_VERSION
 from .constants import geometry_code, hoist
 from .derivatives import law_derivatives
 from .elements import element as get_element
+from .kinematics import F_symbols
 from .fragments import DEFAULT_MAX_OPS, Fragment, split
 from .discrete import QUADRATURE as DISCRETE, build_discrete_ir
 from .kernel_body import build_bodies, stress_record
@@ -50,13 +51,16 @@ def resolve_rule(element_name: str, law, quadrature: str) -> QuadratureRule:
 
 @lru_cache(maxsize=None)       # laws are immutable (hashed by identity); scene validation asks per material
 def law_degree(law) -> int | None:
-    """Total degree of W in the entries of F, or None when W is not polynomial."""
-    d = law_derivatives(law, 3)
-    flat = [s for row in d.F for s in row]
-    expr = sp.expand(d.W)
-    if not expr.is_polynomial(*flat):
+    """Total degree of W in the entries of F, or None when W is not polynomial.
+
+    W alone, not its derivatives: scene validation asks this of every material's law, and a
+    run whose kernels are cached must not differentiate the law (seconds of sympy for Yeoh)."""
+    F = F_symbols(3)
+    flat = [s for row in F for s in row]
+    W = law.energy(sp.Matrix(F), **law.symbols())
+    if not W.is_polynomial(*flat):            # checked before expanding: ln J, J^(-2/3) are slow to expand
         return None
-    return sp.Poly(expr, *flat).total_degree()
+    return sp.Poly(sp.expand(W), *flat).total_degree()
 
 
 def exact_degree(element_name: str, law) -> int | None:
