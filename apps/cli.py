@@ -54,6 +54,7 @@ DEFERRED = {
     "plot": (".plot", "add_plot_command", "draw the per-step history of a run summary (JSON) as a PNG"),
 }
 
+
 def committed_dir() -> Path:
     """The generated/ folder of this installation (the committed catalogue)."""
     return Path(generated.__file__).resolve().parent
