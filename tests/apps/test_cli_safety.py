@@ -502,7 +502,8 @@ def test_unusable_kernel_cache(tmp_path, capsys, monkeypatch, cache):
     code, _, err = run(capsys, "run", scene, "--quiet")
     assert code == 2 and "TENSORMASS_CACHE" in err and str(root) in err and "Traceback" not in err
     assert "compiling C kernel hexahedron_stvk_gauss2" in err
-    code, _, err = run(capsys, "run", scene_file(tmp_path, steps=1), "--quiet")
+    numba = scene_file(tmp_path, solver=STATIC.format(steps=1) + '\nbackend = "numba"', name="numba.toml")
+    code, _, err = run(capsys, "run", numba, "--quiet")
     assert code == 0, err
     kernels.load_kernel.cache_clear()
 
