@@ -37,8 +37,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import numpy as np
-
 from ..base.errors import EXIT_OK, TensormassError
 from .curves import plot_history
 from .history import write_history_csv
@@ -97,7 +95,8 @@ class RunFiles:
     def check_outputs(self, sim) -> None:
         """The checks that need the model (Simulation calls this before its first step; writes
         nothing): the picture's field is one the kernels give, and the mesh is one the picture
-        module can draw (runtime.run.picture.render_picture of the rest state, kept in memory)."""
+        module can draw with the scene's view and clip (runtime.run.picture.check_picture: the rest
+        state rendered in memory)."""
         if not self.picture:
             return
         field = self.picture
@@ -109,8 +108,8 @@ class RunFiles:
             check_picture(sim.model)             # the scene's view and clip included
         except TensormassError as exc:
             hint = "" if field == "displacement" else " (a picture of the displacement: --picture displacement)"
-            raise TensormassError(f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused before the "
-                                  f"first step: {exc}{hint}") from None
+            raise TensormassError(f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this "
+                                  f"scene, refused before the first step: {exc}{hint}") from None
 
     @property
     def picture_path(self):

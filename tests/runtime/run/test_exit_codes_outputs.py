@@ -151,11 +151,11 @@ def test_the_python_api_refuses_an_undrawable_picture_before_writing(tmp_path):
     def refuse(*args, **kwargs):
         calls.append(args)
         raise TensormassError("picture: cannot draw this")
-    original = picture.render_picture
-    picture.render_picture = refuse
+    original = picture.check_picture
+    picture.check_picture = refuse
     try:
         with pytest.raises(TensormassError, match="refused before the first step: picture: cannot draw this"):
             tm.Simulation(scene, output=tmp_path / "api").run()
     finally:
-        picture.render_picture = original
+        picture.check_picture = original
     assert calls and not (tmp_path / "api").exists()
