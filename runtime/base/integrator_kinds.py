@@ -29,7 +29,7 @@ class IntegratorKind:
 KINDS = {k.name: k for k in (
     IntegratorKind("static", dynamic=False, outputs=("energy", "forces", "stiffness"), newton_iterations=4,
                    consistent_mass=True, hanging_nodes=True),
-    IntegratorKind("implicit_euler", dynamic=True, outputs=("energy", "forces", "stiffness"), newton_iterations=2,
+    IntegratorKind("implicit_euler", dynamic=True, outputs=("energy", "forces", "stiffness"), newton_iterations=1,
                    consistent_mass=True, hanging_nodes=True),
     IntegratorKind("backward_euler", dynamic=True, outputs=("energy", "forces", "stiffness"), newton_iterations=2,
                    consistent_mass=True, hanging_nodes=True),

@@ -41,9 +41,16 @@ machine, warm numba cache, StVK gauss2, linear = "auto", 2 steps):
 
 The estimate sits on the upper side by design: it assumes PSD projection may switch on
 (the default project_psd = None does so when a Newton step fails to descend), every dof
-free, and unstructured node adjacency.  Times are rough (within ~5x): kernel operation
-counts from the manifest, scatter entries and the solver's own cost models; on the runs
-above they came out at 0.4-4.6x the measured time per step.
+free, and unstructured node adjacency.
+
+Time per step: the Newton iterations the integrator typically takes (runtime.base.integrator_kinds)
+times the kernels' operation counts (the manifest), the scatter entries and the linear solve the
+solver will choose (its own rule on its own modelled costs), each at a rate fitted once to measured
+runs (the constants below; tests/runtime/scene/measure_estimates.py prints predicted against
+measured, the table is in docs/results.md, "Resource estimates"): 0.6-2x of the measured time per
+step on the organ, a liver-like tetra10 body and the bench bars. A static step that needs more
+Newton iterations than assumed (a soft body sagging by a third of its size in three load steps:
+10 per step) takes that many times longer; the printed estimate says how many it assumed.
 """
 from __future__ import annotations
 
@@ -132,21 +139,39 @@ HISTORY_BYTES_PER_FIXED = 6 * 32 * 2
 # Uniform [[adapt]] refinement (every cell marked, the worst case) per round: cells x 2.0,
 # nodes x 1.6-2.3 measured on tetra and triangle bars.
 REFINE_CELLS, REFINE_NODES = 2.0, 2.5
-# PARDISO (nested dissection) on 3D bodies, measured (solvers.py's table): factor entries
-# ~12-18 x n^(4/3), factor flops ~1.5e-8 x n^2, ~12 bytes per factor entry (the float32
-# factor plus a float64 one when float32 does not converge).
+# PARDISO (nested dissection) on 3D bodies, from its analysis statistics on the organ, a liver-like
+# tetra10 body and the bench bars (tests/runtime/scene/measure_estimates.py): factor entries
+# 12-17 x n^(4/3), factor flops 11-18 x n^2; ~12 bytes per factor entry (the float32 factor plus a
+# float64 one when float32 does not converge).
 PARDISO_FILL = 18.0
-PARDISO_FLOPS_PER_N2 = 1.5e-8
+PARDISO_FLOPS_PER_N2 = 15.0
 PARDISO_BYTES = 12
-# Time: kernels 0.3-1.1 ns per manifest operation (measured), scatter ~3 ns per entry, the
-# band factor ~3e-11 s x n kd^2 and a CG-IC iteration ~1.5e-9 s x nnz (solvers.py's
-# measurements); CG takes ~100 iterations on dynamic systems (the mass term conditions
-# them) and runs into cg_max_iterations on static ones.
-SECONDS_PER_OP = 0.7e-9
+# Time per step = Newton iterations x (kernels + scatter + linear solve + per solve) + per step.
+# The constants are rates of the cost model's counts, fitted once to runs on the 2-core benchmark
+# machine (tests/runtime/scene/measure_estimates.py; the table in docs/results.md, "Resource
+# estimates"); nothing is timed at run time:
+#   kernels      0.21-0.45 ns per manifest operation (the assembler's time per Newton iteration on
+#                hexahedra, tetra and tetra10); scatter ~3 ns per element-matrix entry;
+#   band         ~5e-11 s x n kd^2 (float32 factor, refinement; the factor is reused between steps);
+#   PARDISO      its factor flops (PARDISO_FLOPS_PER_N2 x n^2) at the factor rate of runtime.solve.
+#                choices (PARDISO_FLOPS), plus ~2.5e-8 s per factor entry (PARDISO_FILL x n^(4/3)):
+#                the triangular solves, iterative refinement and the float64 redo when float32 does
+#                not converge, which dominate below ~20 000 dofs (an effective 3-8 Gflop/s measured
+#                there against 25 Gflop/s on 66 000 dofs);
+#   CG           an IC(0) iteration ~1.5e-9 s x nnz, ~100 iterations on dynamic systems (the mass
+#                term conditions them), cg_max_iterations on static ones;
+#   per solve    ~4 ms (the free-dof submatrix, the mass term, copies, residual checks: 5-6 ms per
+#                solve measured on a 936-dof band system whose factor costs 0.6 ms);
+#   per step     an energy and a forces evaluation (the energy history, the reactions) and ~1 ms
+#                (health checks, probes, history).
+SECONDS_PER_OP = 0.35e-9
 SECONDS_PER_ENTRY = 3e-9
-BAND_SECONDS = 3e-11
+BAND_SECONDS = 5e-11
+PARDISO_ENTRY_SECONDS = 2.5e-8
 CG_SECONDS = 1.5e-9
 CG_DYNAMIC_ITERATIONS = 100
+SOLVE_OVERHEAD = 4e-3
+STEP_OVERHEAD = 1e-3
 # What estimate() assumes when no materials or solver are given: a scene's defaults.
 DEFAULT_MATERIAL = Material()
 DEFAULT_SOLVER = Solver()
@@ -371,12 +396,27 @@ def _laws(material, adapt) -> list:
     return reachable_laws(material.law, [r for r in adapt if r.action == "switch_law"])
 
 
+def _covering(materials, cell_type) -> list:
+    """The materials that may cover cells of a type; a region named by a mesh group (not a cell type)
+    may cover any type, which only the mesh tells."""
+    def group(m):
+        region = getattr(m, "region", "all")
+        return isinstance(region, str) and region != "all" and not _is_cell_type(region)
+    return [m for m in materials if may_cover(m, cell_type) or group(m)]
+
+
+def _is_cell_type(name: str) -> bool:
+    try:
+        _elements.get(name)
+    except (KeyError, ValueError, TensormassError):
+        return False
+    return True
+
+
 def _per_type(cell_type, materials, adapt, output) -> tuple:
     """(constants per cell, kernel operations per cell and iteration, kernels) for the costliest material."""
     worst, kernels = (0, 0), set()
-    for m in materials:
-        if not may_cover(m, cell_type):
-            continue
+    for m in _covering(materials, cell_type):
         laws = _laws(m, adapt)
         constants = sum(_entry(cell_type, law, m.quadrature)["constants"] for law in laws)
         ops = _entry(cell_type, m.law, m.quadrature)["ops"].get(output, 0)
@@ -401,6 +441,7 @@ class Estimate:
     dofs: int
     nnz: int                         # nonzeros of the global matrix (estimated)
     band: int                        # estimated band width kd of the direct solver (0: none)
+    newton_iterations: int = 0       # Newton iterations per step the time assumes (0: no Newton solve)
 
     @property
     def seconds(self) -> float:
@@ -411,13 +452,19 @@ class Estimate:
         big = sorted(((v, k) for k, v in self.parts.items() if k != "runtime"), reverse=True)[:3]
         parts = ", ".join(f"{k} {fmt_bytes(v)}" for v, k in big if v > 0)
         return (f"~{fmt_bytes(self.bytes)} peak during the {self.phase} ({parts}); "
-                f"~{_fmt_time(self.seconds_per_step)} per step, ~{_fmt_time(self.seconds)} for {self.steps} step(s)")
+                f"~{_fmt_time(self.seconds_per_step)} per step{self._assumed()}, ~{_fmt_time(self.seconds)} for "
+                f"{self.steps} step(s)")
+
+    def _assumed(self) -> str:
+        """What the time rests on: the Newton iterations per step (strongly nonlinear static steps take more)."""
+        n = self.newton_iterations
+        return f" ({n} Newton iteration{'s' if n != 1 else ''} assumed)" if n else ""
 
     def to_dict(self) -> dict:
         return {"bytes": self.bytes, "parts": dict(self.parts), "phase": self.phase,
                 "seconds_per_step": self.seconds_per_step, "seconds": self.seconds, "steps": self.steps,
                 "nodes": self.nodes, "cells": dict(self.cells), "dofs": self.dofs, "nnz": self.nnz,
-                "band": self.band}
+                "band": self.band, "newton_iterations": self.newton_iterations}
 
 
 def _fmt_time(s: float) -> str:
@@ -493,7 +540,7 @@ class _Estimator:
         # dofs per node (runtime.base.dofs): the dimension for solids; one count per mesh
         dim = self.dpn = max((_dofs_per_node(t, dim) for t in counts.cells), default=dim)
         self.dofs = counts.nodes * dim
-        self.entries = self.constants = self.ops = self.cell_ints = self.cell_dofs = 0
+        self.entries = self.constants = self.ops = self.step_ops = self.cell_ints = self.cell_dofs = 0
         self.projection = False
         kernels = set()
         for t, n in counts.cells.items():
@@ -503,6 +550,8 @@ class _Estimator:
             self.entries += n * (k * dim) ** 2
             self.constants += n * constants
             self.ops += n * ops
+            # every step also evaluates the energy and the forces once (energy history, reactions)
+            self.step_ops += n * sum(_per_type(t, materials, adapt, out)[1] for out in ("energy", "forces"))
             self.cell_ints += n * k
         self.kernels = max(len(kernels), 1)
         self.projection = solver.project_psd is not False and any(
@@ -523,7 +572,9 @@ class _Estimator:
         if method in ("cg", "amg"):
             return "cg"
         if method in ("auto", "direct", "pardiso") and n > AUTO_DIRECT_BELOW and _pardiso.available():
-            if method == "pardiso" or self._band_seconds() > min(PARDISO_ANALYSE_ABOVE, self._pardiso_seconds()):
+            # the solver's rule (runtime.solve.solvers.LinearSolver.choose) on modelled costs
+            band = self._band_seconds()
+            if method == "pardiso" or (band > PARDISO_ANALYSE_ABOVE and band > self._pardiso_seconds()):
                 return "pardiso"
             return "band"
         if method == "auto" and n > AUTO_DIRECT_BELOW:
@@ -535,10 +586,18 @@ class _Estimator:
         return "band"
 
     def _band_seconds(self) -> float:
-        return BAND_SECONDS * self.dofs * float(self.kd) ** 2
+        """The solver's own modelled band seconds (runtime.solve.band.band_costs: what it chooses by)."""
+        from ..solve.band import band_costs
+        factor, iteration = band_costs(self.dofs, self.kd, self.nnz)
+        return factor + 3.0 * iteration
 
     def _pardiso_seconds(self) -> float:
-        return PARDISO_FLOPS_PER_N2 * float(self.dofs) ** 2 / PARDISO_FLOPS
+        """The solver's own modelled PARDISO seconds, a factor and three solves (runtime.solve.solvers.
+        pardiso_costs) for the factor flops and entries of PARDISO_FLOPS_PER_N2 and PARDISO_FILL."""
+        from ..solve.solvers import pardiso_costs
+        n = float(self.dofs)
+        factor, solve = pardiso_costs(PARDISO_FLOPS_PER_N2 * n * n, PARDISO_FILL * n ** (4.0 / 3.0))
+        return factor + 3.0 * solve
 
     def _factor(self) -> int:
         if self.linear == "pardiso":
@@ -581,21 +640,27 @@ class _Estimator:
         return Estimate(bytes=sum(parts.values()), parts=parts, phase=phase,
                         seconds_per_step=self._seconds(), steps=int(self.solver.steps), nodes=c.nodes,
                         cells=dict(c.cells), dofs=self.dofs, nnz=int(self.nnz),
-                        band=self.kd if self.linear == "band" else 0)
+                        band=self.kd if self.linear == "band" else 0,
+                        newton_iterations=0 if self.output == "forces" else self.integrator.newton_iterations)
 
     def _seconds(self) -> float:
+        """Time per step from the counts and the rates above (module constants, never a timing)."""
         kernel = self.ops * SECONDS_PER_OP
+        forces = SECONDS_PER_ENTRY * self.cell_ints * self.dpn        # scatter of the element forces
         if self.output == "forces":
-            return kernel + SECONDS_PER_ENTRY * self.cell_ints * self.dpn
+            return kernel + forces
+        n = float(self.dofs)
         if self.linear == "band":
-            solve = self._band_seconds()
+            solve = BAND_SECONDS * n * float(self.kd) ** 2
         elif self.linear == "pardiso":
-            solve = self._pardiso_seconds()
+            solve = (PARDISO_FLOPS_PER_N2 * n * n / PARDISO_FLOPS
+                     + PARDISO_ENTRY_SECONDS * PARDISO_FILL * n ** (4.0 / 3.0))
         else:
             iterations = CG_DYNAMIC_ITERATIONS if self.integrator.dynamic else self.solver.cg_max_iterations
             solve = CG_SECONDS * self.nnz * min(iterations, self.solver.cg_max_iterations)
-        per_iteration = kernel + SECONDS_PER_ENTRY * self.entries + solve
-        return self.integrator.newton_iterations * per_iteration
+        per_iteration = kernel + SECONDS_PER_ENTRY * self.entries + solve + SOLVE_OVERHEAD
+        extras = self.step_ops * SECONDS_PER_OP + forces + STEP_OVERHEAD
+        return self.integrator.newton_iterations * per_iteration + extras
 
 
 # ============================================================================== the check
