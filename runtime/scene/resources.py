@@ -148,29 +148,29 @@ PARDISO_FLOPS_PER_N2 = 15.0
 PARDISO_BYTES = 12
 # Time per step = Newton iterations x (kernels + scatter + linear solve + per solve) + per step.
 # The constants are rates of the cost model's counts, fitted once to runs on the 2-core benchmark
-# machine (tests/runtime/scene/measure_estimates.py; the table in docs/results.md, "Resource
-# estimates"); nothing is timed at run time:
-#   kernels      0.21-0.45 ns per manifest operation (the assembler's time per Newton iteration on
-#                hexahedra, tetra and tetra10); scatter ~3 ns per element-matrix entry;
-#   band         ~5e-11 s x n kd^2 (float32 factor, refinement; the factor is reused between steps);
+# machine, idle and shared (tests/runtime/scene/measure_estimates.py; the table in docs/results.md,
+# "Resource estimates"); nothing is timed at run time:
+#   kernels      ~0.2 ns per manifest operation with 2 assembly threads (0.1 idle, 0.3-0.5 shared);
+#                scatter ~3 ns per element-matrix entry;
+#   band         the solver's own model (runtime.solve.band.band_costs: a factor and three refinement
+#                iterations); dynamic runs keep a factor for several steps (one for 6 steps on the
+#                hexahedron_2k bench: 1 refinement iteration each), counted as 1 / BAND_REUSE_STEPS;
 #   PARDISO      its factor flops (PARDISO_FLOPS_PER_N2 x n^2) at the factor rate of runtime.solve.
-#                choices (PARDISO_FLOPS), plus ~2.5e-8 s per factor entry (PARDISO_FILL x n^(4/3)):
+#                choices (PARDISO_FLOPS), plus ~2e-8 s per factor entry (PARDISO_FILL x n^(4/3)):
 #                the triangular solves, iterative refinement and the float64 redo when float32 does
-#                not converge, which dominate below ~20 000 dofs (an effective 3-8 Gflop/s measured
-#                there against 25 Gflop/s on 66 000 dofs);
+#                not converge, which dominate below ~20 000 dofs;
 #   CG           an IC(0) iteration ~1.5e-9 s x nnz, ~100 iterations on dynamic systems (the mass
 #                term conditions them), cg_max_iterations on static ones;
-#   per solve    ~4 ms (the free-dof submatrix, the mass term, copies, residual checks: 5-6 ms per
-#                solve measured on a 936-dof band system whose factor costs 0.6 ms);
+#   per solve    ~1 ms (the free-dof submatrix, the mass term, copies, residual checks);
 #   per step     an energy and a forces evaluation (the energy history, the reactions) and ~1 ms
 #                (health checks, probes, history).
-SECONDS_PER_OP = 0.35e-9
+SECONDS_PER_OP = 0.2e-9
 SECONDS_PER_ENTRY = 3e-9
-BAND_SECONDS = 5e-11
-PARDISO_ENTRY_SECONDS = 2.5e-8
+BAND_REUSE_STEPS = 4
+PARDISO_ENTRY_SECONDS = 2e-8
 CG_SECONDS = 1.5e-9
 CG_DYNAMIC_ITERATIONS = 100
-SOLVE_OVERHEAD = 4e-3
+SOLVE_OVERHEAD = 1e-3
 STEP_OVERHEAD = 1e-3
 # What estimate() assumes when no materials or solver are given: a scene's defaults.
 DEFAULT_MATERIAL = Material()
@@ -651,7 +651,10 @@ class _Estimator:
             return kernel + forces
         n = float(self.dofs)
         if self.linear == "band":
-            solve = BAND_SECONDS * n * float(self.kd) ** 2
+            from ..solve.band import band_costs
+            factor, iteration = band_costs(self.dofs, self.kd, self.nnz)
+            reuse = BAND_REUSE_STEPS if self.integrator.dynamic else 1
+            solve = factor / reuse + 3.0 * iteration
         elif self.linear == "pardiso":
             solve = (PARDISO_FLOPS_PER_N2 * n * n / PARDISO_FLOPS
                      + PARDISO_ENTRY_SECONDS * PARDISO_FILL * n ** (4.0 / 3.0))
