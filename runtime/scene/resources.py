@@ -47,10 +47,11 @@ Time per step: the Newton iterations the integrator typically takes (runtime.bas
 times the kernels' operation counts (the manifest), the scatter entries and the linear solve the
 solver will choose (its own rule on its own modelled costs), each at a rate fitted once to measured
 runs (the constants below; tests/runtime/scene/measure_estimates.py prints predicted against
-measured, the table is in docs/results.md, "Resource estimates"): 0.6-2x of the measured time per
-step on the organ, a liver-like tetra10 body and the bench bars. A static step that needs more
-Newton iterations than assumed (a soft body sagging by a third of its size in three load steps:
-10 per step) takes that many times longer; the printed estimate says how many it assumed.
+measured, the table is in docs/results.md, "Resource estimates"): the measured time per step is
+0.36-2.8x the estimate on the organ, a liver-like tetra10 body and the bench bars (idle machine;
+shared cores measured up to 2-3x slower). A static step that needs more Newton iterations than
+assumed (a soft body sagging by a third of its size in three load steps: 11 per step) takes that
+many times longer; the printed estimate says how many it assumed.
 """
 from __future__ import annotations
 
