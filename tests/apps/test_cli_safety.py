@@ -165,7 +165,8 @@ def test_internal_error_is_one_line_exit_1(tmp_path, capsys, monkeypatch):
 def test_ctrl_c_before_the_run_is_one_line_exit_130(tmp_path, capsys, monkeypatch):
     def interrupted(*args, **kw):
         raise KeyboardInterrupt
-    monkeypatch.setattr(commands.Scene, "from_toml", interrupted)
+    from tensormass.runtime.scene.scene import Scene
+    monkeypatch.setattr(Scene, "from_toml", interrupted)
     try:
         code, out, err = run(capsys, "run", scene_file(tmp_path))
     except KeyboardInterrupt:                      # (would end the whole pytest session)
