@@ -18,6 +18,7 @@ from ..physics.fields import FIELDS, check_names as check_field_names
 from ..physics.motion import check_amplitude_use, parse_amplitude, parse_rotation
 from . import formulation_check as _formulation
 from .mesh_source import catalogue_check as _catalogue_check
+from .values import ValueParser, format_value, type_name
 from .types import Adapt, Fixed, Loads, Material, MeshSpec, NodalLoad, Output, PressureLoad, Probe, Solver, TopologyEvent
 
 
@@ -68,127 +69,8 @@ ELEMENTS_2D = BAR_ELEMENTS[2]
 CELL_TYPES = _element_types.names()     # every registered element type (tensormass.elements)
 
 
-def _type_name(value) -> str:
-    return {bool: "boolean", int: "integer", float: "float", str: "string", list: "array",
-            dict: "table"}.get(type(value), type(value).__name__)
-
-
-def _fmt(value) -> str:
-    if isinstance(value, float):
-        return f"{value:g}"
-    return repr(value) if isinstance(value, str) else str(value)
-
-
-class Parser:
-    def __init__(self, base_dir):
-        self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
-        self.scene_dir = Path(base_dir) if base_dir is not None else None   # None: paths stay as written
-        self.dim = None             # 2 or 3 once known
-        self.shell = False          # a shell mesh: [[fixed]] components 3..5 are its rotations
-
-    # -- primitives -------------------------------------------------------------------------
-    @staticmethod
-    def table(value, key) -> dict:
-        if not isinstance(value, dict):
-            raise SceneError(f"{key}: expected a table, got {_type_name(value)}")
-        return value
-
-    @staticmethod
-    def tables(value, key) -> list:
-        """An array of tables; a single table is accepted as a one-element array."""
-        if isinstance(value, dict):
-            return [value]
-        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-            raise SceneError(f"{key}: expected an array of tables ([[{key}]]), got {_type_name(value)}")
-        return value
-
-    @staticmethod
-    def keys(table, key, allowed, extra=()):
-        unknown = [k for k in table if k not in allowed and k not in extra]
-        if unknown:
-            listed = ", ".join(tuple(allowed) + tuple(extra))
-            if key:
-                where = "[" + key.split("[")[0] + "]"
-                raise SceneError(f"{key}.{unknown[0]}: unknown key; allowed keys in {where}: {listed}")
-            raise SceneError(f"{unknown[0]}: unknown table or key; allowed: {listed}")
-
-    @staticmethod
-    def number(value, key, *, positive=False, min_value=None, allow_inf=False) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(f"{key}: expected a number, got {_type_name(value)} {_fmt(value)}")
-        value = float(value)
-        if math.isnan(value) or (math.isinf(value) and not allow_inf):
-            raise SceneError(f"{key}: must be a finite number (got {_fmt(value)})")
-        if positive and not value > 0:
-            raise SceneError(f"{key}: must be > 0 (got {_fmt(value)})")
-        if min_value is not None and value < min_value:
-            raise SceneError(f"{key}: must be >= {_fmt(min_value)} (got {_fmt(value)})")
-        return value
-
-    @staticmethod
-    def integer(value, key, min_value=None, max_value=None, why="") -> int:
-        """An int in [min_value, max_value]; why: the reason for max_value, for the message."""
-        if isinstance(value, bool) or not isinstance(value, int):
-            hint = ""
-            if isinstance(value, float) and value.is_integer():
-                # TOML reads 1e12 and 100.0 as floats: say so, and what the integer would hit
-                hint = " (TOML reads numbers with an exponent or a decimal point as floats"
-                if max_value is not None and value > max_value:
-                    hint += f"; and {int(value):,} is above the limit of {max_value:,}{': ' + why if why else ''})"
-                else:
-                    hint += f": write {int(value)})"
-            raise SceneError(f"{key}: expected an integer, got {_type_name(value)} {_fmt(value)}{hint}")
-        if min_value is not None and value < min_value:
-            raise SceneError(f"{key}: must be >= {min_value} (got {value})")
-        if max_value is not None and value > max_value:
-            raise SceneError(f"{key}: must be <= {max_value:,} (got {value:,}){': ' + why if why else ''}")
-        return int(value)
-
-    @staticmethod
-    def string(value, key, choices=None) -> str:
-        if not isinstance(value, str):
-            raise SceneError(f"{key}: expected a string, got {_type_name(value)} {_fmt(value)}")
-        if choices is not None and value not in choices:
-            raise SceneError(f"{key}: unknown value {value!r}; allowed: {', '.join(choices)}")
-        return value
-
-    @staticmethod
-    def boolean(value, key) -> bool:
-        if not isinstance(value, bool):
-            raise SceneError(f"{key}: expected true or false, got {_type_name(value)} {_fmt(value)}")
-        return value
-
-    def vector(self, value, key, dim=None, allow_inf=False) -> tuple:
-        """A list of numbers with the scene's dimension (2 or 3 while it is not known yet)."""
-        dim = dim if dim is not None else self.dim
-        if not isinstance(value, list):
-            raise SceneError(f"{key}: expected an array of {dim or '2 or 3'} numbers, got {_type_name(value)}")
-        if (dim is not None and len(value) != dim) or (dim is None and len(value) not in (2, 3)):
-            what = f"{dim}" if dim is not None else "2 or 3"
-            extra = " (the mesh is 2D: use 2 components)" if dim == 2 else (
-                " (the mesh is 3D: use 3 components)" if dim == 3 else "")
-            raise SceneError(f"{key}: expected {what} components, got {len(value)}{extra}")
-        return tuple(self.number(v, f"{key}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value))
-
-    @staticmethod
-    def region(value, key):
-        """A region of the mesh: a group name (non-empty string) or an integer id (runtime.mesh.regions)."""
-        if isinstance(value, bool) or not isinstance(value, (str, int)) or (isinstance(value, str) and not value.strip()):
-            raise SceneError(f"{key}: expected a region name (a string) or an integer id, got "
-                             f"{_type_name(value)} {_fmt(value)}")
-        return value
-
-    def box(self, value, key) -> tuple:
-        if not isinstance(value, list) or len(value) != 2:
-            raise SceneError(f"{key}: expected [[min...], [max...]] (two corner points), got {_fmt(value)}")
-        lo = self.vector(value[0], f"{key}[0]", allow_inf=True)
-        hi = self.vector(value[1], f"{key}[1]", dim=len(lo), allow_inf=True)
-        bad = [i for i in range(len(lo)) if lo[i] > hi[i]]
-        if bad:
-            i = bad[0]
-            raise SceneError(f"{key}: min > max in component {i} ({_fmt(lo[i])} > {_fmt(hi[i])}); "
-                             "write box = [[min...], [max...]]")
-        return (lo, hi)
+class Parser(ValueParser):
+    """The tables of a scene (the values' checks: runtime.scene.values)."""
 
     # -- tables -----------------------------------------------------------------------------
     def scene_fields(self, data) -> dict:
@@ -278,7 +160,7 @@ class Parser:
             element = "hexahedron" if self.dim == 3 else "quad"
         for i, s in enumerate(size):
             if s <= 0:
-                raise SceneError(f"mesh.size[{i}]: must be > 0 (got {_fmt(s)})")
+                raise SceneError(f"mesh.size[{i}]: must be > 0 (got {format_value(s)})")
         allowed = ELEMENTS_3D if self.dim == 3 else ELEMENTS_2D
         if element not in allowed:
             raise SceneError(f"mesh.element: {element!r} is not a {self.dim}D element; for a {self.dim}D "
@@ -287,7 +169,7 @@ class Parser:
             cells_raw = t["cells"]
             if not isinstance(cells_raw, list) or len(cells_raw) != self.dim:
                 raise SceneError(f"mesh.cells: expected {self.dim} integers (one per entry of mesh.size), "
-                                 f"got {_fmt(cells_raw)}")
+                                 f"got {format_value(cells_raw)}")
             cells = tuple(self.integer(c, f"mesh.cells[{i}]", 1) for i, c in enumerate(cells_raw))
         else:
             cells = (10, 2, 2)[: self.dim]
@@ -335,10 +217,10 @@ class Parser:
                 raise SceneError(f"mesh.{k}: only used with generate = \"sphere\"")
         size = self.vector(t.get("size", [1.0, 1.0]), "mesh.size", dim=2)
         if min(size) <= 0:
-            raise SceneError(f"mesh.size: a plate takes 2 positive sizes [a, b], got {_fmt(list(size))}")
+            raise SceneError(f"mesh.size: a plate takes 2 positive sizes [a, b], got {format_value(list(size))}")
         cells_raw = t.get("cells", [8, 8])
         if not isinstance(cells_raw, list) or len(cells_raw) != 2:
-            raise SceneError(f"mesh.cells: a plate takes 2 integers [nx, ny], got {_fmt(cells_raw)}")
+            raise SceneError(f"mesh.cells: a plate takes 2 integers [nx, ny], got {format_value(cells_raw)}")
         cells = tuple(self.integer(c, f"mesh.cells[{i}]", 1) for i, c in enumerate(cells_raw))
         return MeshSpec(generate="plate", file=None, size=size, cells=cells, element=element, origin=origin)
 
@@ -356,7 +238,7 @@ class Parser:
         region = t.get("region", "all")
         if isinstance(region, bool) or not isinstance(region, (str, int)):
             raise SceneError(f"{key}.region: expected \"all\", an element type, an integer cell tag or a "
-                             f"region (group) name, got {_type_name(region)}")
+                             f"region (group) name, got {type_name(region)}")
         if isinstance(region, str) and not region.strip():
             raise SceneError(f"{key}.region: must not be empty; use \"all\", an element type "
                              f"({', '.join(CELL_TYPES)}), an integer cell tag, a region (group) name of the mesh, "
@@ -375,7 +257,7 @@ class Parser:
             _formulation.check_element(f"{key}.formulation", formulation, region)
         density = self.number(t.get("density", 1000.0), f"{key}.density")
         if density <= 0:
-            raise SceneError(f"{key}.density: must be > 0 (got {_fmt(density)})")
+            raise SceneError(f"{key}.density: must be > 0 (got {format_value(density)})")
         if law.kind in ("discrete", "shell"):
             mat = self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
             mat.law_file = law_file
@@ -576,7 +458,7 @@ class Parser:
         if "rayleigh" in t:
             raw = t["rayleigh"]
             if not isinstance(raw, list) or len(raw) != 2:
-                raise SceneError(f"solver.rayleigh: expected [alpha, beta] (2 numbers), got {_fmt(raw)}")
+                raise SceneError(f"solver.rayleigh: expected [alpha, beta] (2 numbers), got {format_value(raw)}")
             s.rayleigh = tuple(self.number(v, f"solver.rayleigh[{i}]", min_value=0.0) for i, v in enumerate(raw))
         if "project_psd" in t:
             s.project_psd = self.boolean(t["project_psd"], "solver.project_psd")
@@ -601,7 +483,7 @@ class Parser:
         if "rho_inf" in t:
             s.rho_inf = self.number(t["rho_inf"], "solver.rho_inf", min_value=0.0)
             if s.rho_inf > 1.0:
-                raise SceneError(f"solver.rho_inf: must be <= 1 (got {_fmt(s.rho_inf)}); 1 = no numerical damping, "
+                raise SceneError(f"solver.rho_inf: must be <= 1 (got {format_value(s.rho_inf)}); 1 = no numerical damping, "
                                  "0 = the strongest high-frequency damping")
             if not integrator_kinds.get(s.kind).takes_rho_inf:
                 raise SceneError(f"solver.rho_inf: only used by kind = \"generalized_alpha\" (kind is {s.kind!r})")
@@ -643,8 +525,8 @@ class Parser:
                 raise SceneError(f"{key}.time: a static run has load steps, not time; give step = ...")
             event.time = self.number(t["time"], f"{key}.time", min_value=0.0)
             if _event_step(event.time, solver) > solver.steps:
-                raise SceneError(f"{key}.time: {_fmt(event.time)} is after the run's end "
-                                 f"({solver.steps} steps of {_fmt(solver.dt)})")
+                raise SceneError(f"{key}.time: {format_value(event.time)} is after the run's end "
+                                 f"({solver.steps} steps of {format_value(solver.dt)})")
         else:
             event.step = self.integer(t["step"], f"{key}.step", 1, solver.steps,
                                       why=f"the run has {solver.steps} steps")
@@ -655,7 +537,7 @@ class Parser:
                 raise SceneError(f"{key}.plane: missing (plane = [[x, y, z], [nx, ny, nz]]: a point and the normal)")
             plane = t["plane"]
             if not isinstance(plane, list) or len(plane) != 2:
-                raise SceneError(f"{key}.plane: expected [[point...], [normal...]], got {_fmt(plane)}")
+                raise SceneError(f"{key}.plane: expected [[point...], [normal...]], got {format_value(plane)}")
             event.point = self.vector(plane[0], f"{key}.plane[0]")
             event.normal = self.vector(plane[1], f"{key}.plane[1]", dim=len(event.point))
             if not any(event.normal):
@@ -731,11 +613,11 @@ class Parser:
             rule.back = self.number(t["back"], f"{key}.back", min_value=0.0)
             if (rule.back >= rule.threshold) != rule.below or rule.back == rule.threshold:
                 side = "above" if rule.below else "below"
-                raise SceneError(f"{key}.back: must be {side} the threshold {_fmt(rule.threshold)} "
-                                 f"(got {_fmt(rule.back)}): the gap is the hysteresis")
+                raise SceneError(f"{key}.back: must be {side} the threshold {format_value(rule.threshold)} "
+                                 f"(got {format_value(rule.back)}): the gap is the hysteresis")
         if rule.relative and rule.threshold > 1.0:
             raise SceneError(f"{key}.threshold: a relative threshold is a fraction of the maximum, in [0, 1] "
-                             f"(got {_fmt(rule.threshold)})")
+                             f"(got {format_value(rule.threshold)})")
         if "every" in t:
             rule.every = self.integer(t["every"], f"{key}.every", 1)
         if "rounds" in t:
@@ -757,7 +639,7 @@ class Parser:
             out.every = self.integer(t["every"], "output.every", 1)
         if "fields" in t:                 # [] for none; names checked against runtime.physics.fields.FIELDS
             if not isinstance(t["fields"], list):
-                raise SceneError(f"output.fields: expected an array of field names, got {_type_name(t['fields'])} "
+                raise SceneError(f"output.fields: expected an array of field names, got {type_name(t['fields'])} "
                                  f"(known fields: {', '.join(FIELDS)})")
             out.fields = check_field_names(t["fields"], "output.fields", SceneError)
         if "picture" in t:                # true: von Mises; a field name; false: none (runtime.run.picture)
@@ -770,7 +652,7 @@ class Parser:
             clip = t["clip"]
             if not isinstance(clip, list) or len(clip) != 2:
                 raise SceneError(f"output.clip: expected [[point...], [normal...]] (the picture keeps the cells on "
-                                 f"the side the normal points away from), got {_fmt(clip)}")
+                                 f"the side the normal points away from), got {format_value(clip)}")
             point = self.vector(clip[0], "output.clip[0]")
             normal = self.vector(clip[1], "output.clip[1]", dim=len(point))
             if not any(normal):
@@ -798,10 +680,10 @@ def view_angles(value, key: str) -> tuple:
         return VIEWS[value]
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise SceneError(f"{key}: expected a view name ({', '.join(VIEWS)}) or [azimuth, elevation] in degrees, "
-                         f"got {_fmt(value)}")
+                         f"got {format_value(value)}")
     angles = tuple(Parser.number(v, f"{key}[{i}]") for i, v in enumerate(value))
     if not -90.0 <= angles[1] <= 90.0:
-        raise SceneError(f"{key}[1]: the elevation must be within [-90, 90] degrees, got {_fmt(angles[1])}")
+        raise SceneError(f"{key}[1]: the elevation must be within [-90, 90] degrees, got {format_value(angles[1])}")
     return angles
 
 
@@ -837,7 +719,7 @@ def _check_bar_extent(size, origin) -> None:
         far = max(abs(o), abs(o + s))
         if not far <= COORD_MAX:
             key = f"mesh.origin[{i}]" if abs(o) > COORD_MAX else f"mesh.size[{i}]"
-            raise SceneError(f"{key}: coordinates too large: the bar reaches {_fmt(far)} m along axis {i}, beyond "
+            raise SceneError(f"{key}: coordinates too large: the bar reaches {format_value(far)} m along axis {i}, beyond "
                              f"+-{COORD_MAX:g}; element volumes and energies would overflow float64 "
                              "(a unit mix-up? coordinates are in meters)")
 
@@ -845,12 +727,12 @@ def _check_bar_extent(size, origin) -> None:
 def _law_error(key, E, nu, exc) -> str:
     """The scene's message for a LawError of a material: the key of E or nu when laws refused them."""
     if E is not None and not E > 0:
-        return f"{key}.E: Young's modulus must be > 0 (got {_fmt(E)})"
+        return f"{key}.E: Young's modulus must be > 0 (got {format_value(E)})"
     if nu is not None and nu >= 0.5:
-        return (f"{key}.nu: Poisson's ratio must be < 0.5 (got {_fmt(nu)}); nu = 0.5 is "
+        return (f"{key}.nu: Poisson's ratio must be < 0.5 (got {format_value(nu)}); nu = 0.5 is "
                 "incompressible, which these displacement elements cannot represent")
     if nu is not None and nu <= -1.0:
-        return f"{key}.nu: Poisson's ratio must be > -1 (got {_fmt(nu)})"
+        return f"{key}.nu: Poisson's ratio must be > -1 (got {format_value(nu)})"
     return f"{key}: {exc}"
 
 
@@ -858,15 +740,15 @@ def _check_native(key, law, native, dim):
     """Plausibility of native parameters whose meaning we know; finiteness is checked for all."""
     mu = native.get("mu")
     if mu is not None and mu <= 0:
-        raise SceneError(f"{key}.mu: shear modulus must be > 0 (got {_fmt(mu)})")
+        raise SceneError(f"{key}.mu: shear modulus must be > 0 (got {format_value(mu)})")
     lam = native.get("lam")
     if lam is not None and mu is not None:
         # positive bulk modulus <=> -1 < nu < 0.5 (3D); plane strain needs lam + mu > 0
         if (dim == 2 and lam + mu <= 0) or (dim != 2 and 3 * lam + 2 * mu <= 0):
-            raise SceneError(f"{key}.lam: lam = {_fmt(lam)} with mu = {_fmt(mu)} gives a non-positive "
+            raise SceneError(f"{key}.lam: lam = {format_value(lam)} with mu = {format_value(mu)} gives a non-positive "
                              "bulk modulus (Poisson's ratio outside (-1, 0.5))")
     kappa = native.get("kappa")
     if kappa is not None and kappa <= 0:
-        raise SceneError(f"{key}.kappa: bulk modulus must be > 0 (got {_fmt(kappa)})")
+        raise SceneError(f"{key}.kappa: bulk modulus must be > 0 (got {format_value(kappa)})")
     if "C10" in native and "C01" in native and native["C10"] + native["C01"] <= 0:
-        raise SceneError(f"{key}.C10: C10 + C01 must be > 0 (got {_fmt(native['C10'] + native['C01'])})")
+        raise SceneError(f"{key}.C10: C10 + C01 must be > 0 (got {format_value(native['C10'] + native['C01'])})")
