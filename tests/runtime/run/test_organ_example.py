@@ -1,6 +1,7 @@
 """examples/organ/ (#12): a gmsh-made organ whose scene selects everything by the mesh's physical
 groups; it reads, passes the mesh checks and runs, and its region loads, constraints and probes are
 what the groups say."""
+import re
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from tensormass.runtime.scene.scene import Scene
 from tensormass.runtime.run.simulation import Simulation
 
 ORGAN = Path(__file__).resolve().parents[3] / "examples" / "organ"
+GETTING_STARTED = Path(__file__).resolve().parents[3] / "docs" / "getting-started.md"
 A, B, C = 0.040, 0.030, 0.030
 
 
@@ -82,6 +84,9 @@ def test_the_organ_scene_runs():
     assert summary.probes["loaded"] == pytest.approx(u[loaded].mean(axis=0).tolist())
     assert summary.probes["loaded"][2] < -1e-4 and summary.probes["pole"][2] < summary.probes["loaded"][2] * 0.5
     assert np.abs(u[region_nodes(sim.model.mesh, "attached")]).max() == 0.0
+    # the number the getting-started page states is this run's
+    stated = re.search(r"examples/organ/scene.toml .*the pole sinks ([0-9.]+) mm", GETTING_STARTED.read_text())
+    assert stated and float(stated.group(1)) == pytest.approx(-1e3 * summary.probes["pole"][2], abs=0.005)
 
 
 def test_make_organ_makes_the_shipped_mesh(tmp_path):
