@@ -136,7 +136,7 @@ def test_the_default_backend_is_c_with_a_compiler_else_numba(monkeypatch):
     assert scene.solver.backend == "c"                    # a scene's own choice stays
 
 
-def test_warm_up_calls_only_the_outputs_the_run_calls():
+def test_warm_up_calls_only_the_outputs_the_run_calls(monkeypatch):
     """A Hooke part under an implicit solver: its constant K is assembled once, and its energy
     and forces come from K, so the warm-up compiles only its stiffness."""
     from tensormass.apps.commands import demo_text
@@ -148,7 +148,8 @@ def test_warm_up_calls_only_the_outputs_the_run_calls():
     called = []
     for part in model.parts:
         for name in ("energy", "forces", "stiffness", "forces_and_stiffness"):
-            setattr(part.kernel, name, lambda D, u, _k=(part.law, name): called.append(_k))
+            # monkeypatch: the kernels are cached and shared with every later test of this process
+            monkeypatch.setattr(part.kernel, name, lambda D, u, _k=(part.law, name): called.append(_k))
     model.warm_up()
     assert {law for law, _ in called} == {"hooke", "stvk"}
     assert sorted({k for k in called if k[0] == "hooke"}) == [("hooke", "stiffness")]
