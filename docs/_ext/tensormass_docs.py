@@ -179,7 +179,7 @@ def law_lines() -> list:
     from tensormass import laws
     entries = _manifest()
     rows = []
-    for name in laws.names():
+    for name in laws.names(user=False):      # the published catalogue: never the builder's $TENSORMASS_LAWS
         law = laws.get(name)
         options = {o: d for o, d, _ in getattr(law, "options", ())}
         params = ", ".join(p + (f" (default {options[p]:g})" if options.get(p) is not None else "")

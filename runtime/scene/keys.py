@@ -76,6 +76,7 @@ TABLES = (
 _BOX = "[[x0, y0, z0], [x1, y1, z1]] (2D: two components)"
 _VEC = "array of 2 or 3 numbers (the mesh's dimension)"
 _REGION = "string or integer"
+_LAWS = "runtime.scene.keys:builtin_laws"
 
 KEYS = (
     # -- top level ---------------------------------------------------------------------------
@@ -118,7 +119,7 @@ KEYS = (
     Key("material", "region", _REGION, "all",
         doc="\"all\", an element type, an integer cell tag or group id, or a volume group's name."),
     Key("material", "box", _BOX, unit="m", doc="Only the cells whose centroid lies in the box (with region: both)."),
-    Key("material", "law", "string", "stvk", choices="laws:names", doc="The constitutive law (see the catalogue)."),
+    Key("material", "law", "string", "stvk", choices=_LAWS, doc="The constitutive law (see the catalogue)."),
     Key("material", "law_file", "string", doc="A law file outside the package (Python defining LAW = Law(...)), "
         "relative to the scene file; law is then the name it defines (see Materials, Your own law)."),
     Key("material", "quadrature", "string", "gauss2", choices=("gauss1", "gauss2", "gauss3", "exact", "discrete"),
@@ -239,8 +240,8 @@ KEYS = (
         doc="The per-element criterion (rotation in degrees)."),
     Key("adapt", "threshold", "number", REQUIRED, doc="The criterion's threshold, >= 0 (relative: in [0, 1])."),
     Key("adapt", "action", "string", "switch_law", choices="runtime.scene.parser:ADAPT_ACTIONS", doc="What a passing cell does."),
-    Key("adapt", "law", "string", choices="laws:names", doc="switch_law: the target law (required there)."),
-    Key("adapt", "from", "string", choices="laws:names", doc="switch_law: only cells under this law."),
+    Key("adapt", "law", "string", choices=_LAWS, doc="switch_law: the target law (required there)."),
+    Key("adapt", "from", "string", choices=_LAWS, doc="switch_law: only cells under this law."),
     Key("adapt", "back", "number", doc="switch_law: switch back past this value (hysteresis)."),
     Key("adapt", "relative", "boolean", False, doc="The threshold is a fraction of the largest value."),
     Key("adapt", "below", "boolean", False, doc="Act when the criterion falls below the threshold."),
@@ -279,6 +280,14 @@ def mesh_elements() -> tuple:
     """What mesh.element accepts: the generated bars' element types (mixed included) and shell."""
     from .parser import ELEMENTS_2D, ELEMENTS_3D
     return tuple(dict.fromkeys(ELEMENTS_3D + ELEMENTS_2D + ("shell",)))
+
+
+def builtin_laws() -> tuple:
+    """What law names (material.law, adapt.law / from) list: the built-in laws.  A user law (law_file,
+    $TENSORMASS_LAWS) is accepted too, but belongs to its user: the generated reference stays the
+    same whatever law files the process that builds it has loaded."""
+    from ... import laws
+    return tuple(laws.names(user=False))
 
 
 def table_of(name: str) -> Table:
