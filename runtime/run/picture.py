@@ -273,7 +273,9 @@ def _prepare(mesh, points, displacement, values, field_name, unit, scale, size, 
     polys, cells, two_sided = _polygons(mesh, kept)
     if not polys:
         if kept is not None and _polygons(mesh, None)[0]:
-            raise TensormassError(f"picture: clip {_fmt_clip(clip)} removes every cell; nothing is left to draw")
+            raise TensormassError(f"picture: clip {_fmt_clip(clip)} removes every cell (the rest centre of each lies "
+                                  "on the side the normal points to, which is cut away); nothing is left to draw: "
+                                  "move the clip's point into the body, or turn its normal round")
         raise TensormassError("picture: the mesh has no 2D or 3D cells to draw")
     return dict(mesh=mesh, dim=dim, x=X + scale * u, values=arr, where=where, label=label, unit=str(unit or ""),
                 scale=scale, width=width, height=height, cmap=colormap, clim=(lo, hi), view=(azim, elev),

@@ -24,7 +24,9 @@ ours (all unless overwrite), a picture or plot asked without an output folder, a
 run is writing into, and two files of this run at one path (--json s.csv would be its own
 history, --json onto the folder's history or a picture); in check_outputs(sim), once the model
 is built (Simulation calls it before its first step), a picture field the kernels cannot give and
-a mesh the picture cannot draw (a picture of the rest state is rendered, not written).
+a mesh, view or clip the picture cannot draw (a picture of the rest state is rendered, not written).
+The default field (von Mises) is not refused: where the kernels give no stress (co-rotational
+shells) the displacement is drawn instead, and the summary says so.
 
 The picture and the plot are optional: when one of them cannot be written after a run that
 reached its end (a mesh changed by a cut, a full disk), the run keeps its exit code 0; the
@@ -70,6 +72,7 @@ class RunFiles:
         self.summary_path = None if self.out_dir is None else self.out_dir / SUMMARY_NAME
         self.picture = scene.output.picture              # a field name, or None
         self.plot = scene.output.plot
+        self.picture_note = None                         # why the default field was not drawn
         self.data = None
         self._prepared = False
 
@@ -96,20 +99,42 @@ class RunFiles:
         """The checks that need the model (Simulation calls this before its first step; writes
         nothing): the picture's field is one the kernels give, and the mesh is one the picture
         module can draw with the scene's view and clip (runtime.run.picture.check_picture: the rest
-        state rendered in memory)."""
+        state rendered in memory).
+
+        The default field (picture = true, a bare --picture: von Mises) falls back to the
+        displacement where a kernel gives no stress (co-rotational shells): the picture is then
+        <dir>/displacement.png, and the summary's output says why (picture_note)."""
         if not self.picture:
             return
+        from ..physics.fields import check_available, has_stress
+        from ..scene.parser import PICTURE_DEFAULT
+        if self.picture == PICTURE_DEFAULT:
+            bare = next((p for p in sim.model.parts if not has_stress(p.kernel)), None)
+            if bare is not None:
+                self._fall_back_to_displacement(f"{PICTURE_DEFAULT} needs the stress records of every kernel, and "
+                                                f"the kernel for {bare.element}/{bare.law}/{bare.quadrature} gives none")
         field = self.picture
+        refused = f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused " \
+                  "before the first step: "
         try:
             if field not in ("displacement", "u"):
-                from ..physics.fields import check_available
                 check_available(sim.model, [field], sim._field_providers())
-            from .picture import check_picture
-            check_picture(sim.model)             # the scene's view and clip included
         except TensormassError as exc:
-            hint = "" if field == "displacement" else " (a picture of the displacement: --picture displacement)"
-            raise TensormassError(f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this "
-                                  f"scene, refused before the first step: {exc}{hint}") from None
+            raise TensormassError(f"{refused}{exc} (a picture of the displacement: --picture displacement)") from None
+        from .picture import check_picture
+        try:
+            check_picture(sim.model)             # the scene's view and clip included
+        except TensormassError as exc:       # the mesh, view or clip: no other field would help
+            raise TensormassError(f"{refused}{exc}") from None
+
+    def _fall_back_to_displacement(self, why: str) -> None:
+        """The default picture field is not available: draw the displacement, its own file checked
+        like the one it replaces (prepare())."""
+        self.picture = "displacement"
+        self.picture_note = f"the displacement is drawn: {why}"
+        self._check_collisions()
+        if self.writer is not None and self.out_dir.is_dir():
+            self._check_folder_extras()
 
     @property
     def picture_path(self):
@@ -230,6 +255,8 @@ class RunFiles:
             out["picture_error"] = _optional_failed(data, "picture", path, exc)
             return out
         out["picture"] = str(path)
+        if self.picture_note:
+            out["picture_note"] = self.picture_note
         return out
 
     def _plot(self, data) -> dict:

@@ -227,7 +227,8 @@ KEYS = (
         doc="The fields every frame carries, each as cell or point data (name@cell / name@point: "
             "the other); [] for none."),
     Key("output", "picture", "boolean or string", default_text="none",
-        doc="A PNG of the deformed body at the end: true (von Mises), a field name or \"displacement\"."),
+        doc="A PNG of the deformed body at the end: true (von Mises; the displacement where a kernel gives no "
+            "stress, as co-rotational shells), a field name or \"displacement\"."),
     Key("output", "plot", "boolean", False, doc="The per-step history curves as summary.png."),
     Key("output", "view", "string or [azimuth, elevation]", default_text="[-60, 20]", unit="degrees",
         choices="runtime.scene.parser:VIEWS",

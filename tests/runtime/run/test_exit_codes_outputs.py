@@ -9,70 +9,18 @@ import pytest
 
 from tensormass.apps.cli import main
 
-BAR = """
-name = "bar"
-[mesh]
-generate = "bar"
-size = [1.0, 0.2, 0.2]
-cells = [2, 1, 1]
-element = "hexahedron"
-[[material]]
-law = "stvk"
-quadrature = "gauss2"
-E = 1.0e6
-nu = 0.3
-density = 800.0
-[[fixed]]
-box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[solver]
-kind = "static"
-steps = 2
-[[probe]]
-name = "tip"
-point = [1.0, 0.1, 0.1]
-"""
+from run_scenes import bar, plate, write_scene
 
-PLATE = """
-name = "plate"
-[mesh]
-generate = "plate"
-size = [1.0, 1.0]
-cells = [2, 2]
-[[material]]
-law = "cst_dkt"
-E = 1.0e7
-nu = 0.3
-thickness = 0.01
-corotational = 0
-density = 1000.0
-[[fixed]]
-box = [[-1, -1, -1], [1e-9, 2, 1]]
-[[loads.pressure]]
-box = [[-1, -1, -1], [2, 2, 1]]
-value = 1.0
-[solver]
-kind = "static"
-steps = 1
-backend = "c"
-[[probe]]
-name = "corner"
-point = [1.0, 1.0, 0.0]
-"""
-
-SCENES = {"bar": BAR, "shell": PLATE}
+SCENES = {"bar": bar(), "shell": plate()}
 
 
-def _scene(tmp_path, kind):
-    path = tmp_path / f"{kind}.toml"
-    path.write_text(SCENES[kind])
-    return path
+def _scene(tmp_path, kind, text=None):
+    return write_scene(tmp_path, SCENES[kind] if text is None else text, kind)
 
 
-def _run(tmp_path, kind, *extra):
+def _run(tmp_path, kind, *extra, text=None):
     out = tmp_path / "out"
-    rc = main(["run", str(_scene(tmp_path, kind)), "--out", str(out), "--quiet", *extra])
+    rc = main(["run", str(_scene(tmp_path, kind, text)), "--out", str(out), "--quiet", *extra])
     return rc, out
 
 
@@ -159,3 +107,32 @@ def test_the_python_api_refuses_an_undrawable_picture_before_writing(tmp_path):
     finally:
         picture.check_picture = original
     assert calls and not (tmp_path / "api").exists()
+
+
+def test_a_bare_picture_of_a_corotational_shell_draws_the_displacement(tmp_path, capsys):
+    """The default field (von Mises) needs stress records a co-rotational shell kernel does not give:
+    a bare --picture draws the displacement instead, checked before the first step, exit 0."""
+    rc, out = _run(tmp_path, "shell", "--picture", text=plate(corotational=True))
+    assert rc == 0, capsys.readouterr().err
+    data = json.loads((out / "summary.json").read_text())
+    assert data["status"] == "ok"
+    assert data["output"]["picture"] == str(out / "displacement.png") and (out / "displacement.png").is_file()
+    assert not (out / "von_mises.png").exists()
+    assert data["output"]["picture_note"] == ("the displacement is drawn: von_mises needs the stress records of every "
+                                              "kernel, and the kernel for shell/cst_dkt/exact gives none")
+
+
+def test_a_named_field_the_kernels_cannot_give_is_still_refused(tmp_path, capsys):
+    rc, out = _run(tmp_path, "shell", "--picture", "cauchy_stress", text=plate(corotational=True))
+    assert rc == 2 and not out.exists()
+    assert "refused before the first step" in capsys.readouterr().err
+
+
+def test_a_clip_that_keeps_no_cell_names_the_clip_not_the_field(tmp_path, capsys):
+    """A clip refusal says what the clip does wrong and how to mend it; no other picture field helps."""
+    rc, out = _run(tmp_path, "bar", "--picture", text=bar(output="clip = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]"))
+    err = capsys.readouterr().err
+    assert rc == 2 and not out.exists()
+    assert "removes every cell (the rest centre of each lies on the side the normal points to" in err
+    assert "move the clip's point into the body, or turn its normal round" in err
+    assert "--picture displacement" not in err

@@ -11,40 +11,14 @@ from tensormass.apps.cli import main
 from tensormass.runtime.model.model import Model
 from tensormass.runtime.run.output import SUMMARY_FORMAT
 
-SCENE = """
-name = "bar"
-[mesh]
-generate = "bar"
-size = [1.0, 0.2, 0.2]
-cells = [4, 1, 1]
-element = "hexahedron"
-[[material]]
-law = "stvk"
-quadrature = "gauss2"
-E = 1.0e6
-nu = 0.3
-density = 800.0
-[[fixed]]
-box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[solver]
-kind = "implicit_euler"
-dt = 0.01
-steps = 3
-[[probe]]
-name = "tip"
-point = [1.0, 0.1, 0.1]
-[output]
-dir = "frames"
-"""
+from run_scenes import IMPLICIT, bar, write_scene
+
+SCENE = bar(cells=4, solver=IMPLICIT, output='dir = "frames"')
 
 
 @pytest.fixture
 def scene_path(tmp_path):
-    path = tmp_path / "bar.toml"
-    path.write_text(SCENE)
-    return path
+    return write_scene(tmp_path, SCENE, "bar")
 
 
 def _files(folder):

@@ -10,35 +10,9 @@ import pytest
 import tensormass as tm
 from tensormass.runtime.base.errors import RunStopped
 
-SCENE = """
-name = "bar"
-[mesh]
-generate = "bar"
-size = [1.0, 0.2, 0.2]
-cells = [2, 1, 1]
-element = "hexahedron"
-[[material]]
-law = "stvk"
-quadrature = "gauss2"
-E = 1.0e6
-nu = 0.3
-density = 800.0
-[[fixed]]
-box = [[-1e-9, -1, -1], [1e-9, 1, 1]]
-[loads]
-gravity = [0.0, 0.0, -9.81]
-[solver]
-kind = "implicit_euler"
-dt = 0.01
-steps = 3
-backend = "c"
-[[probe]]
-name = "tip"
-point = [1.0, 0.1, 0.1]
-[[probe]]
-name = "end"
-box = [[0.99, -1, -1], [2, 1, 1]]
-"""
+from run_scenes import END, IMPLICIT, TIP, bar
+
+SCENE = bar(solver=IMPLICIT, backend="c", probes=(TIP, END))
 
 
 def _scene():
