@@ -23,7 +23,8 @@ def _forget_user_laws():
 
 
 def _extension():
-    spec = importlib.util.spec_from_file_location("tensormass_docs_under_test", ROOT / "docs" / "_ext" / "tensormass_docs.py")
+    path = ROOT / "docs" / "_ext" / "tensormass_docs.py"
+    spec = importlib.util.spec_from_file_location("tensormass_docs_under_test", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

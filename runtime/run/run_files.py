@@ -111,8 +111,9 @@ class RunFiles:
         if self.picture == PICTURE_DEFAULT:
             bare = next((p for p in sim.model.parts if not has_stress(p.kernel)), None)
             if bare is not None:
-                self._fall_back_to_displacement(f"{PICTURE_DEFAULT} needs the stress records of every kernel, and "
-                                                f"the kernel for {bare.element}/{bare.law}/{bare.quadrature} gives none")
+                kernel = f"{bare.element}/{bare.law}/{bare.quadrature}"
+                self._fall_back_to_displacement(f"{PICTURE_DEFAULT} needs the stress records of every kernel, "
+                                                f"and the kernel for {kernel} gives none")
         field = self.picture
         refused = f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused " \
                   "before the first step: "

@@ -78,6 +78,19 @@ _VEC = "array of 2 or 3 numbers (the mesh's dimension)"
 _REGION = "string or integer"
 _LAWS = "runtime.scene.keys:builtin_laws"
 
+
+def _load_amplitude(table: str) -> Key:
+    """The amplitude key of [[loads.force]], [[loads.traction]] and [[loads.moment]] (one rule for all three)."""
+    return Key(table, "amplitude", "string", default_text="ramp (static), constant (dynamic)",
+               doc="An amplitude scaling the load.")
+
+
+def _when(table: str) -> tuple:
+    """When an event of [[cut]], [[remove]] or [[refine]] happens: the same two keys for each."""
+    return (Key(table, "time", "number", unit="s", doc="After the first step ending at or past it (dynamic runs)."),
+            Key(table, "step", "integer", doc="Or after this step."))
+
+
 KEYS = (
     # -- top level ---------------------------------------------------------------------------
     Key("", "name", "string", default_text="the scene file's name without .toml",
@@ -165,18 +178,15 @@ KEYS = (
     Key("loads.force", "box", _BOX, unit="m", doc="The nodes inside; box or region (both: the intersection)."),
     Key("loads.force", "region", _REGION, doc="The nodes of a mesh group."),
     Key("loads.force", "value", _VEC, REQUIRED, "N", doc="The total force, split evenly over the nodes."),
-    Key("loads.force", "amplitude", "string", default_text="ramp (static), constant (dynamic)",
-        doc="An amplitude scaling the load."),
+    _load_amplitude("loads.force"),
     Key("loads.traction", "box", _BOX, unit="m", doc="The boundary faces with every node inside."),
     Key("loads.traction", "region", _REGION, doc="The boundary faces of a mesh group."),
     Key("loads.traction", "value", _VEC, REQUIRED, "Pa", doc="Force per unit area, integrated consistently."),
-    Key("loads.traction", "amplitude", "string", default_text="ramp (static), constant (dynamic)",
-        doc="An amplitude scaling the load."),
+    _load_amplitude("loads.traction"),
     Key("loads.moment", "box", _BOX, unit="m", doc="The nodes inside."),
     Key("loads.moment", "region", _REGION, doc="The nodes of a mesh group."),
     Key("loads.moment", "value", "array of 3 numbers", REQUIRED, "N m", doc="The total moment (shells)."),
-    Key("loads.moment", "amplitude", "string", default_text="ramp (static), constant (dynamic)",
-        doc="An amplitude scaling the load."),
+    _load_amplitude("loads.moment"),
     Key("loads.pressure", "box", _BOX, unit="m", doc="The boundary faces with every node inside."),
     Key("loads.pressure", "region", _REGION, doc="The boundary faces of a mesh group."),
     Key("loads.pressure", "value", "number", REQUIRED, "Pa",
@@ -249,8 +259,7 @@ KEYS = (
     Key("adapt", "every", "integer", 1, doc="Check every this many steps."),
     Key("adapt", "rounds", "integer", 1, doc="refine: refinement passes over the run at most."),
     # -- [[cut]], [[remove]], [[refine]] ---------------------------------------------------------
-    Key("cut", "time", "number", unit="s", doc="After the first step ending at or past it (dynamic runs)."),
-    Key("cut", "step", "integer", doc="Or after this step."),
+    *_when("cut"),
     Key("cut", "plane", "[[point...], [normal...]]", unit="m",
         doc="The plane (rest coordinates): faces between cells whose centroids lie on either side open."),
     Key("cut", "box", _BOX, unit="m", doc="Only the faces inside: an incision (a blade's start)."),
@@ -261,13 +270,11 @@ KEYS = (
     Key("cut", "every", "integer", 1, doc="Tearing: checked every this many steps."),
     Key("cut", "sweep", _VEC, unit="m", doc="A blade: the box moves by this vector from time over duration."),
     Key("cut", "duration", "number", unit="s", doc="A blade: how long the sweep takes."),
-    Key("remove", "time", "number", unit="s", doc="After the first step ending at or past it (dynamic runs)."),
-    Key("remove", "step", "integer", doc="Or after this step."),
+    *_when("remove"),
     Key("remove", "box", _BOX, unit="m", doc="The cells whose rest centroid lies inside."),
     Key("remove", "region", _REGION, doc="The cells of a mesh group (with box: both)."),
     Key("remove", "name", "string", doc="The event's name in the summary."),
-    Key("refine", "time", "number", unit="s", doc="After the first step ending at or past it (dynamic runs)."),
-    Key("refine", "step", "integer", doc="Or after this step."),
+    *_when("refine"),
     Key("refine", "box", _BOX, REQUIRED, "m", doc="The hexahedra whose rest centroid lies inside are split 1:8."),
     Key("refine", "name", "string", doc="The event's name in the summary."),
 )

@@ -13,7 +13,8 @@ TIP = ("tip", "point = [1.0, 0.1, 0.1]")
 END = ("end", "box = [[0.99, -1, -1], [2, 1, 1]]")
 
 
-def bar(cells: int = 2, solver: str = STATIC, backend: str | None = None, probes=(TIP,), output: str | None = None) -> str:
+def bar(cells: int = 2, solver: str = STATIC, backend: str | None = None, probes=(TIP,),
+        output: str | None = None) -> str:
     """A bar of `cells` x 1 x 1 stvk hexahedra (1 x 0.2 x 0.2 m, E = 1 MPa) under gravity; solver: the
     [solver] lines besides backend; probes: (name, the line placing it); output: the [output] lines."""
     lines = ['name = "bar"', "[mesh]", 'generate = "bar"', "size = [1.0, 0.2, 0.2]", f"cells = [{cells}, 1, 1]",
