@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ... import elements as _types
+from ...elements._faces import FACE_ONLY
 from ..base.errors import TensormassError
 from .loads import normal_areas, shape_table
 
@@ -71,8 +73,6 @@ class FollowerPressure:
 
     def _is_closed(self) -> bool:
         """Every corner edge (3D) or corner vertex (2D) of the loaded faces is shared by exactly two."""
-        from ... import elements as _types
-        from ...elements._faces import FACE_ONLY
         keys = []
         for name, (faces, _) in self.groups.items():
             t = FACE_ONLY.get(name) or _types.get(name)

@@ -31,6 +31,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..base.errors import DegenerateElementError, TensormassError
+
 __all__ = ["CorotationalShell", "rest_frames", "rotation_matrices"]
 
 N, P, NDOF = 3, 6, 18
@@ -322,7 +324,6 @@ class CorotationalShell:
         D = np.ascontiguousarray(D, dtype=np.float64)
         u = np.ascontiguousarray(u, dtype=np.float64).reshape(len(D), N, P)
         if not np.all(np.isfinite(u)):
-            from ..base.errors import TensormassError
             raise TensormassError(f"{self}: displacements contain NaN or Inf")
         n = len(D)
         f = np.zeros((n, NDOF)) if want_f else np.zeros((1, NDOF))
@@ -330,7 +331,6 @@ class CorotationalShell:
         W, flags = np.zeros(n), np.zeros(n, dtype=np.int32)
         _evaluate(D, self._rest(D), u, want_f, want_K, f, K, W, flags)
         if flags.any():
-            from ..base.errors import DegenerateElementError
             bad = np.flatnonzero(flags)
             raise DegenerateElementError(f"shell: {bad.size} element(s) collapsed to a line or a point "
                                          f"(first: element {int(bad[0])})")

@@ -18,8 +18,10 @@ from functools import lru_cache
 
 import numpy as np
 
+from ... import elements, laws
 from ..base import integrator_kinds
 from ..base.errors import TensormassError
+from .kernels import load_kernel
 
 __all__ = ["RIGID_MODES", "ZERO_EIGENVALUE", "UNIQUE_TOLERANCE", "spurious_modes", "hourglass_message", "check_static"]
 
@@ -31,8 +33,6 @@ ZERO_EIGENVALUE = 1e-8              # relative to the largest eigenvalue of the 
 def spurious_modes(element: str, law: str, quadrature: str, backend: str = "numba") -> int | None:
     """Zero-energy modes of the element stiffness at rest beyond the rigid motions; None when unknown
     (a kernel that cannot be loaded or evaluated here, or nodes that carry more than a displacement)."""
-    from ... import elements, laws
-    from .kernels import load_kernel
     try:
         kernel = load_kernel(element, law, quadrature, backend)
         if kernel.dofs_per_node != kernel.dim or kernel.dim not in RIGID_MODES:

@@ -49,6 +49,7 @@ from .band import (BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_s
     reuse_cap)
 from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
 from ..base.errors import TensormassError
+from ..base.parallel import worker_threads
 
 __all__ = ["LinearSolver", "ConstrainedSystem", "DIRECT_LIMIT", "METHODS", "PRECONDITIONERS",
            "has_pardiso", "has_pyamg", "unavailable", "warm_up", "band_ordering", "band_costs", "reuse_cap",
@@ -122,13 +123,8 @@ def amg_cost(nnz: int) -> float:
 
 
 def _worker_threads() -> int:
-    """The runtime's thread count (runtime.base.parallel when present, else numba's)."""
-    try:
-        from ..base.parallel import worker_threads
-        return int(worker_threads())
-    except ImportError:                  # pragma: no cover - before runtime.base.parallel existed
-        import numba
-        return int(numba.get_num_threads())
+    """The runtime's thread count (tests replace it to try PARDISO's thread choice)."""
+    return int(worker_threads())
 
 
 # --------------------------------------------------------------------------- per pattern
