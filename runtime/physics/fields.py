@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..base.errors import ElementError, TensormassError
+from ..mesh.regions import assign_materials
 
 __all__ = ["Field", "FIELDS", "DEFAULT_FIELDS", "FieldEvaluator", "evaluate", "check_names", "check_available",
            "describe", "resolve", "split_name", "locations", "frame_dtype"]
@@ -264,7 +265,6 @@ class FieldEvaluator:
             return model.cell_law().astype(np.int64)
         if name not in self._ids:
             if name == "material":
-                from ..mesh.regions import assign_materials
                 values = np.concatenate(list(assign_materials(model.mesh, model.materials)) + [np.zeros(0)])
             else:
                 values = cell_regions(model.mesh)

@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..base.errors import TensormassError
+from ..mesh.topology import cells_around, incidence
 
 __all__ = ["HangingNodes", "hanging_nodes"]
 
@@ -61,7 +62,6 @@ def hanging_nodes(mesh) -> tuple:
 
 def _lies_on_a_cell_without_being_its_node(mesh, rows) -> np.ndarray:
     """Boolean per midpoint row: its node lies on the closure of some cell that does not hold it."""
-    from ..mesh.topology import cells_around, incidence
     n_rows = len(rows)
     row_of = np.full(mesh.n_points, -1, dtype=np.int64)
     row_of[rows[:, 0]] = np.arange(n_rows)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import laws
+from ..assembly import volumetric
 from ..assembly.assembly import Assembler
 from ..base.errors import InvertedElementError, TensormassError
 from ..solve.amg import rigid_body_modes
@@ -224,7 +225,6 @@ class MixedPressure:
     """
 
     def __init__(self, asm, u):
-        from ..assembly import volumetric
         self.asm, self.scatter_cells, self.scatter_patches = asm, volumetric._scatter_cells, volumetric._scatter_patches
         self.state = [self._consistent(c, self._theta(c, u)[0]) for c in asm.couplings]
         self.last = None                # per coupling (J, b_g . d per unit step needs fe) of the last matrix

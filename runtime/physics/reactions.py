@@ -53,6 +53,7 @@ import numpy as np
 from ..base import integrator_kinds
 from ..base.errors import TensormassError
 from ..mesh.regions import box_contains, selection_nodes
+from .integrators import _stiffness_times as _integrator_stiffness_times
 
 __all__ = ["Reactions", "residual", "reaction_field", "entry_name"]
 
@@ -191,8 +192,7 @@ def _evaluate(ctx, integrator) -> np.ndarray:
 
 
 def _stiffness_times(ctx, u, v):
-    from .integrators import _stiffness_times as times
-    return times(ctx.asm, u, v, ctx.asm.forces(u), ctx.model.size)
+    return _integrator_stiffness_times(ctx.asm, u, v, ctx.asm.forces(u), ctx.model.size)
 
 
 def reaction_field(sim) -> np.ndarray:
