@@ -38,6 +38,7 @@ from numba import njit
 from ... import elements as _types
 from ..base.errors import TensormassError
 from ..mesh.regions import switch_applies
+from ..mesh.refine import refine
 
 __all__ = ["CRITERIA", "Adapter", "Change", "criteria", "part_criteria", "mean_deformation_gradients"]
 
@@ -296,7 +297,6 @@ class Adapter:
 
     # -- refine ---------------------------------------------------------------------------------
     def _refine(self, ctx, step, rules, values, change: Change) -> None:
-        from ..mesh.refine import refine
         model = ctx.model
         marked = np.zeros(model.mesh.n_cells, dtype=bool)
         for r in rules:

@@ -31,9 +31,11 @@ import copy
 import numpy as np
 
 from ... import laws
+from ... import elements as _types
 from ..assembly import loads as _loads
 from ..base.dofs import node_dofs
 from ..assembly.mass import MassMatrix
+from ..assembly.pressure import FollowerPressure
 from ..model.model import LawGroup, Part
 from ..physics.motion import Motion
 from ..mesh.probes import PointProbe
@@ -60,7 +62,6 @@ def check_model(model) -> None:
 
 
 def _flat(model, cell_type) -> bool:
-    from ... import elements as _types
     return _types.get(cell_type).dim != model.dim
 
 
@@ -306,7 +307,6 @@ def _mapped(model, split, mask, f):
 
 def _pressure_on(model, new, remap):
     """A FollowerPressure like the model's with its faces passed through remap(name, faces)."""
-    from ..assembly.pressure import FollowerPressure
     old = model.pressure
     loads = []
     for name, (faces, _) in old.groups.items():

@@ -18,10 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cutting import check_model, removed, separated
+from .adapt import mean_deformation_gradients
+from ..assembly.pattern import SparsePattern
 from ..base import integrator_kinds
 from ..mesh.regions import box_tolerance, region_cell_masks
-from ..mesh.topology import (TopologyError, _cell_nodes, box_cells, check_topology, incidence, plane_pairs,
-    refine_hexahedra, removal, separate)
+from ..mesh.topology import (TopologyError, _cell_nodes, _face_rows, _shared_faces, box_cells, check_topology,
+    incidence, plane_pairs, refine_hexahedra, removal, separate)
 
 __all__ = ["TopologyEvents", "tearing_pairs", "blade_fractions", "pieces"]
 
@@ -86,7 +88,6 @@ class TopologyEvents:
         self._plan(model)
         self._rehearse(model.mesh, {name: (p.cell, p.nodes) for name, p in model.probes.items()})
         if any(e.kind == "cut" for e in self.events):
-            from ..assembly.pattern import SparsePattern
             SparsePattern.warm_up_growth()
 
     # -- setup ----------------------------------------------------------------------------------
@@ -301,7 +302,6 @@ def _step(event, solver) -> int:
 
 def _still_joined(mesh, pairs) -> np.ndarray:
     """The pairs that still share a face (an earlier cut may have opened some of them already)."""
-    from ..mesh.topology import _face_rows, _shared_faces
     if not len(pairs):
         return pairs
     keys, owner = _face_rows(mesh, np.unique(pairs))
@@ -335,9 +335,7 @@ def _face_normals(points, keys) -> np.ndarray:
 def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.ndarray:
     """Cell pairs whose shared face the body stretches across by more than 1 + threshold: |F n| with n the
     face's rest normal and F the mean of the two cells' volume-averaged deformation gradients."""
-    from ..mesh.topology import _face_rows
     mesh = model.mesh
-    from .adapt import mean_deformation_gradients
     F = mean_deformation_gradients(model, u)
     stretch = np.sqrt(np.linalg.eigvalsh(np.einsum("eji,ejk->eik", F, F))[:, -1])
     hot = np.flatnonzero(stretch >= 1.0 + threshold)

@@ -74,6 +74,7 @@ from xml.sax.saxutils import quoteattr, unescape
 import numpy as np
 
 from ..base.errors import TensormassError
+from ..mesh.io import to_meshio
 from ..physics.fields import frame_dtype
 from .lock import LOCK_NAME, FolderLock
 from ..base.files import check_writable, os_reason as _reason, remove_quietly, write_bytes_atomic, write_json_atomic
@@ -494,7 +495,6 @@ class Writer:
             for part in parts:
                 _check_finite(f"cell field {key!r}", part)
 
-        from ..mesh.io import to_meshio
         m = to_meshio(mesh, pad_to_3d=True)
         m.points = self._pad(X)
         m.point_data = point_data

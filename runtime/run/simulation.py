@@ -33,6 +33,8 @@ from ..physics import reactions as _reactions
 from ..assembly.assembly import Assembler
 from ..mesh.refine import interpolate_nodal
 from ..change.events import TopologyEvents
+from ..physics.volume_constraint import VolumeConstraintError
+from .run_files import RunFiles, summary_mapping
 
 __all__ = ["Simulation", "Summary"]
 
@@ -306,7 +308,6 @@ class Simulation:
         written (no "output": None)."""
         if summary is None:
             return
-        from .run_files import summary_mapping
         scene = self.model.scene
         summary.attach(summary_mapping(summary, stopped, scene, self._rest_mesh))
 
@@ -403,7 +404,6 @@ class Simulation:
         constraint, free = model.volume_constraint
         U = self.ctx.u.reshape(model.n_points, model.dofs_per_node)
         x = model.mesh.points + U[:, :model.dim]
-        from ..physics.volume_constraint import VolumeConstraintError
         try:
             x_new, _ = constraint.project(x, free=free)
         except VolumeConstraintError as exc:
@@ -651,7 +651,6 @@ def _as_lists(reactions: dict, keys) -> dict:
 
 def _run_files(scene, output, json, overwrite):
     """The RunFiles of Simulation(scene, output=..., json=...), prepared; None: nothing to write."""
-    from .run_files import RunFiles
     if isinstance(output, RunFiles):
         output.prepare()
         return output
