@@ -33,6 +33,10 @@ from ..runtime.kernels.kernels import load_kernel
 from ..runtime.mesh.bars import generate_bar
 from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
+from ..runtime.base import parallel
+from ..runtime.assembly.assembly import Assembler
+from ..runtime.model.model import Model
+from ..runtime.scene.types import Material, Solver
 
 LAW = "neohookean"
 # name: (element, quadrature, cubes per side)
@@ -136,10 +140,6 @@ def run_case(name, element, quadrature, n, backends=BACKENDS, repeats=REPEATS, p
 
 def _runtime_rows(mesh, element, quadrature, backend, U, f_ref, data_ref, repeats) -> dict:
     """Assembler.forces_and_stiffness of a Model on this mesh, on 1 thread and on all of them."""
-    from ..runtime.base import parallel
-    from ..runtime.assembly.assembly import Assembler
-    from ..runtime.model.model import Model
-    from ..runtime.scene.types import Material, Solver
     model = Model(mesh, [Material(law=LAW, quadrature=quadrature, E=1.0e6, nu=0.3)],
                   solver=Solver(backend=backend), check=False)
     asm = Assembler(model)

@@ -29,6 +29,7 @@ import numpy as np
 from ..runtime.assembly import colouring as col
 from ..runtime.base import parallel
 from ..runtime.base.files import write_json_atomic
+from .machine import machine_info
 
 __all__ = ["main", "run_colouring_bench", "tet_mesh", "icosphere", "plate"]
 
@@ -136,7 +137,6 @@ def run_colouring_bench(n: int = 50000, threads=(1, 2), repeats: int = 5) -> dic
         load = os.getloadavg()
     except OSError:
         load = None
-    from .machine import machine_info
     return {"n": n, "threads": threads, "repeats": repeats, "load_average": load,
             "machine": machine_info(), "rows": rows}
 

@@ -27,7 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from ..runtime.base.files import write_json_atomic
+from . import organ_mesh
 from .machine import machine_info
+from ..runtime.physics.newton import Context
+from ..runtime.model.model import Model
+from ..runtime.scene.scene import Scene
+from ..runtime.run.simulation import Simulation
 
 __all__ = ["run_cutting_bench", "add_cutting_command", "TARGET_MS"]
 
@@ -67,8 +72,7 @@ def _bar(cells, element, law, quad) -> str:
 
 def _organ(folder: Path) -> str | None:
     try:
-        from .organ_mesh import make
-        path = make(folder / "organ.msh", size=0.0042, order=1, scale=2.2)
+        path = organ_mesh.make(folder / "organ.msh", size=0.0042, order=1, scale=2.2)
     except Exception:                 # gmsh missing or failing: the bars only
         return None
     return _scene(f'[mesh]\nfile = "{path.as_posix()}"',
@@ -78,8 +82,6 @@ def _organ(folder: Path) -> str | None:
 
 def _full_rebuild(sim) -> float:
     """Seconds to build the cut model from scratch and its solver state (the baseline)."""
-    from ..runtime.physics.newton import Context
-    from ..runtime.model.model import Model
     m, scene = sim.model, sim.model.scene
     start = time.perf_counter()
     model = Model(m.mesh, scene.materials, scene.fixed, scene.loads, scene.probes, scene.solver, scene.output,
@@ -91,8 +93,6 @@ def _full_rebuild(sim) -> float:
 
 
 def _measure(text: str) -> dict:
-    from ..runtime.scene.scene import Scene
-    from ..runtime.run.simulation import Simulation
     sim = Simulation(Scene.from_string(text), output=False)
     s = sim.run()
     (record,) = s.topology

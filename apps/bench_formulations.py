@@ -18,6 +18,8 @@ from ..runtime.base import parallel
 from ..runtime.base.files import write_json_atomic
 from .bench_organ import Case, organ_mesh, probe_point, scene_text
 from .machine import machine_info
+from ..runtime.scene.scene import Scene
+from ..runtime.run.simulation import Simulation
 
 __all__ = ["run_formulations_bench", "add_formulations_command"]
 
@@ -33,7 +35,6 @@ QUICK_CASES = (
 
 
 def _scene(case: Case, formulation: str):
-    from ..runtime.scene.scene import Scene
     mesh = organ_mesh(case)[0] if case.body == "organ" else None
     text = scene_text(case, mesh)
     text = re.sub(r"(?m)^(nu = .*)$", rf'\1\nformulation = "{formulation}"', text, count=1)
@@ -43,7 +44,6 @@ def _scene(case: Case, formulation: str):
 
 
 def _measure(case: Case, formulation: str, repeats: int) -> dict:
-    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         sim = Simulation(_scene(case, formulation), output=False)

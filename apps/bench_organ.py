@@ -58,6 +58,15 @@ import numpy as np
 from ..runtime.base.errors import TensormassError
 from ..runtime.base.files import write_json_atomic
 from .machine import format_machine, machine_info
+from . import organ_mesh as mesh_maker
+from ..runtime.base import parallel
+from ..runtime.base.cache import cache_dir, writable_cache_dir
+from ..runtime.model.model import Model
+from ..runtime.run.simulation import Simulation
+from ..runtime.scene import resources
+from ..runtime.scene.scene import Scene
+from ..runtime.solve import solvers
+from .bench_steps import E as E_BAR, NEWTON_CASE, NU as NU_BAR, scene_text as bar_text
 
 MAKE_ORGAN = Path(__file__).resolve().with_name("organ_mesh.py")      # the mesh maker (its hash names the meshes)
 ORGAN_SCALE = 2.2                      # liver-sized: semi-axes 88 x 66 x 66 mm
@@ -115,8 +124,7 @@ class GmshMissing(TensormassError):
 
 def load_make_organ():
     """The organ mesh maker (tensormass.apps.organ_mesh, installed with the package)."""
-    from . import organ_mesh
-    return organ_mesh
+    return mesh_maker
 
 
 def require_gmsh() -> None:
@@ -129,7 +137,6 @@ def require_gmsh() -> None:
 
 def mesh_path(case: Case, folder: Path | None = None) -> Path:
     """Where the case's mesh lives in the cache (named by the script's hash and the options)."""
-    from ..runtime.base.cache import cache_dir
     digest = hashlib.sha256(MAKE_ORGAN.read_bytes()).hexdigest()[:12]
     folder = Path(folder) if folder is not None else cache_dir() / "organ"
     return folder / f"organ-{digest}-x{case.scale:g}-h{1e3 * case.size:g}mm-o{case.order}.msh"
@@ -141,7 +148,6 @@ def organ_mesh(case: Case, folder: Path | None = None) -> tuple[Path, float]:
     if path.is_file():
         return path, 0.0
     require_gmsh()
-    from ..runtime.base.cache import writable_cache_dir
     writable_cache_dir(path.parent, "bench organ (the organ meshes)")
     maker = load_make_organ()
     t0 = time.perf_counter()
@@ -188,7 +194,6 @@ newton_tolerance = {NEWTON_TOLERANCE}
 def scene_text(case: Case, mesh_file: Path | None) -> str:
     if case.body == "organ":
         return organ_scene_text(case, mesh_file)
-    from .bench_steps import NEWTON_CASE, scene_text as bar_text
     size = NEWTON_CASE[3]
     return bar_text("hexahedron", case.cells, size, "neohookean", case.kind, "auto", case.steps)
 
@@ -197,21 +202,18 @@ def probe_point(case: Case) -> tuple:
     """Where the displacement is compared: the organ's top pole, the cantilever's free end (top middle)."""
     if case.body == "organ":
         return (0.0, 0.0, 0.030 * case.scale)
-    from .bench_steps import NEWTON_CASE
     lx, ly, lz = NEWTON_CASE[3]
     return (lx, ly / 2, lz)
 
 
 def make_scene(text: str, method: str):
     """Scene from TOML text with [solver] linear = method (the scene keys take every solvers.METHODS name)."""
-    from ..runtime.scene.scene import Scene
     text = re.sub(r'(?m)^linear = .*\n', "", text)
     return Scene.from_string(text.replace('[solver]\n', f'[solver]\nlinear = "{method}"\n', 1))
 
 
 def available_solvers(requested=None) -> tuple[list, dict]:
     """(methods to run, {method: why skipped}) from solvers.METHODS, read now."""
-    from ..runtime.solve import solvers
     methods, skipped = [], {}
     offered = list(solvers.METHODS)
     for name in (requested or offered):
@@ -241,17 +243,12 @@ def _peak_mb() -> float | None:
 def _threads_in_use() -> dict:
     import numba
     out = {"numba": int(numba.get_num_threads())}
-    try:
-        from ..runtime.base import parallel
-        out["runtime"] = int(parallel.worker_threads())
-    except (ImportError, AttributeError):
-        out["runtime"] = None                    # the runtime's thread switch is not there (yet)
+    out["runtime"] = int(parallel.worker_threads())
     return out
 
 
 def run_tensormass(spec: dict) -> dict:
     """One configuration, in this process: Simulation.run of the case's scene with the given solver."""
-    from ..runtime.run.simulation import Simulation
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), spec["method"])
     t0 = time.perf_counter()
@@ -289,7 +286,6 @@ def run_felupe(spec: dict) -> dict | None:
         import felupe as fem
     except ImportError:
         return None
-    from ..runtime.model.model import Model
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), "auto")
     model = Model.from_scene(scene)                  # not timed: only the mesh, the clamp and the loads
@@ -343,7 +339,6 @@ def run_felupe(spec: dict) -> dict | None:
 
 
 def _cantilever_material():
-    from .bench_steps import E as E_BAR, NU as NU_BAR
     return E_BAR, NU_BAR
 
 
@@ -374,7 +369,6 @@ def _subprocess(role: str, spec: dict, threads: int | None, timeout: float) -> d
 # -- the benchmark ----------------------------------------------------------------------------
 def _memory_note(text: str, method: str) -> str | None:
     """A note when the run's memory estimate exceeds what the machine can give (runtime.scene.resources)."""
-    from ..runtime.scene import resources
     try:
         scene = make_scene(text, method)          # reading the scene checks the estimate already
         resources.check(resources.estimate(scene), None, what="this case")

@@ -26,6 +26,9 @@ import numpy as np
 from ..runtime.assembly import assembly
 from ..runtime.base.files import write_json_atomic
 from ..runtime.assembly.pattern import SparsePattern, _ReferencePattern
+from ..runtime.scene.scene import Scene
+from ..runtime.physics.newton import Context
+from ..runtime.model.model import Model
 
 __all__ = ["main", "run_pattern_bench", "scene_dict"]
 
@@ -81,9 +84,6 @@ def _check_same(model) -> None:
 
 
 def run_pattern_bench(repeats: int = 5, quick: bool = False, progress=print) -> dict:
-    from ..runtime.scene.scene import Scene
-    from ..runtime.physics.newton import Context
-    from ..runtime.model.model import Model
 
     report = {"repeats": repeats, "cases": {}}
     for element, cells in (QUICK if quick else MESHES).items():

@@ -18,6 +18,10 @@ from ..runtime.base import parallel
 from ..runtime.base.errors import TensormassError
 from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
+from ..runtime.scene.scene import Scene
+from ..runtime.run.simulation import Simulation
+from ..runtime.mesh import surfaces
+from ..runtime.assembly.colouring import colour_cells
 
 __all__ = ["run_shells_bench", "add_shells_command", "THESIS_S_PER_FRAME"]
 
@@ -60,8 +64,6 @@ point = [0.0, 0.0, 1.0]
 
 
 def _measure(subdivisions, corotational, threads, repeats) -> dict:
-    from ..runtime.scene.scene import Scene
-    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         parallel.set_threads(threads)
@@ -84,8 +86,6 @@ def _measure(subdivisions, corotational, threads, repeats) -> dict:
 
 
 def colour_count(subdivisions) -> dict:
-    from ..runtime.mesh import surfaces
-    from ..runtime.assembly.colouring import colour_cells
     _, triangles = surfaces.icosphere(1.0, subdivisions)
     return {method: int(colour_cells(triangles, method=method).max()) + 1 for method in ("dsatur", "greedy")}
 

@@ -24,6 +24,8 @@ from ..runtime.base import parallel
 from ..runtime.base.errors import TensormassError
 from ..runtime.base.files import write_json_atomic
 from .machine import machine_info
+from ..runtime.scene.scene import Scene
+from ..runtime.run.simulation import Simulation
 
 __all__ = ["run_springs_bench", "add_springs_command", "MODELS"]
 
@@ -77,8 +79,6 @@ point = [{size[0]}, {size[1] / 2}, {size[2] / 2}]
 
 
 def _measure(model: str, kind: str, n: int, element: str, backend: str, repeats: int) -> dict:
-    from ..runtime.scene.scene import Scene
-    from ..runtime.run.simulation import Simulation
     best = None
     for _ in range(repeats):
         sim = Simulation(Scene.from_string(scene_text(model, kind, n, element, backend)), output=False)

@@ -21,6 +21,10 @@ from ..backends import BACKENDS
 from ..runtime.base.files import write_json_atomic
 from ..runtime.scene.scene import Scene
 from .machine import machine_info
+from ..runtime.run.simulation import Simulation
+from ..runtime.physics.newton import Context
+from ..runtime.model.model import Model
+from ..runtime.solve.solvers import LinearSolver, has_pardiso
 
 BODIES = {
     # name: (element, cells, size)
@@ -77,7 +81,6 @@ backend = "{backend}"
 
 
 def measure(element, cells, size, law, kind, linear, steps) -> dict:
-    from ..runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, kind, linear, steps))
     t0 = time.perf_counter()
     sim = Simulation(scene, output=False)
@@ -108,7 +111,6 @@ def measure(element, cells, size, law, kind, linear, steps) -> dict:
 def health_overhead(element, cells, size, law, steps=30) -> dict:
     """The health monitor's own time per implicit Euler step against the step (30 steps, direct):
     measured by the monitor in the same run, so machine load hits both alike."""
-    from ..runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
     scene = Scene.from_string(scene_text(element, cells, size, law, "implicit_euler", "direct", steps))
     summary = Simulation(scene, output=False).run()
     wall = summary.per_step["wall"]
@@ -136,10 +138,6 @@ def newton_iteration(element, cells, size, law, repeats=NEWTON_REPEATS, solvers=
     unknowns for the band Cholesky, once per sparsity pattern) is reported apart.
     The assembly with the other kernel backend is timed too (`assembly_s_by_backend`).
     """
-    # deferred: model, integrators and solvers cost ~0.2 s at every CLI start
-    from ..runtime.physics.newton import Context
-    from ..runtime.model.model import Model
-    from ..runtime.solve.solvers import LinearSolver, has_pardiso
     by_backend = {}
     for other in BACKENDS:
         if other == backend:

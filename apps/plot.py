@@ -15,12 +15,12 @@ from pathlib import Path
 
 from ..runtime.base.errors import TensormassError
 from ..runtime.run.output import SUMMARY_FORMAT, check_png_path, is_summary_file
+from ..runtime.run.curves import plot_history
 
 __all__ = ["add_plot_command", "cmd_plot"]
 
 
 def cmd_plot(args) -> int:
-    from ..runtime.run.curves import plot_history
     source = Path(args.summary)
     if not source.exists():
         raise TensormassError(f"plot {source}: no such file")

@@ -86,6 +86,8 @@ from .block import block
 from .hybmss import hybmss
 from .common import E_MOD, NU, RHO, SIZE, G, analytic_tip, measure, result_row
 from .file_levels import FileLevels
+from ..batch import map_tasks
+from ..batch import DASK_MISSING, dask_available
 
 __all__ = ["run_accuracy", "add_accuracy_command", "pareto_front", "COLUMNS", "MODEL_COLUMNS", "BENCHMARK_NAMES"]
 
@@ -219,7 +221,6 @@ def _builtin(quick, progress, sweep, workers=1, scheduler=None) -> tuple:
 def _map(tasks, progress, workers, scheduler) -> list:
     """Run the tasks (apps/batch.map_tasks: in this process, or on dask), print each task's progress
     lines in task order, return the results in task order (a task's exception propagates)."""
-    from ..batch import map_tasks
 
     def show(i, outcome):
         for line in outcome[1][-1]:
@@ -657,7 +658,6 @@ def _workers(args) -> int:
     if workers < 1:
         raise TensormassError(f"--workers must be at least 1, got {workers}")
     if workers > 1 or getattr(args, "scheduler", None):
-        from ..batch import DASK_MISSING, dask_available
         if not dask_available():
             raise TensormassError(DASK_MISSING)
     return workers

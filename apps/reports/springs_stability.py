@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .stability_runs import BAR, DIVERGED, GRAVITY, INVALID, STABLE, Run, outcome_in, scene_dict, stable_dt
+from ...runtime.mesh.bars import generate_bar
 
 __all__ = ["case_spring_compression", "case_spring_extremes", "BUCKLED", "asymmetry"]
 
@@ -61,7 +62,6 @@ def case_spring_compression(quick):
         name = law if A is None else f"{law} A={A:g}"
         data = compression_scene(law, A, n, steps, dt)
         L = n * CELL
-        from ...runtime.mesh.bars import generate_bar        # deferred: mesh costs ~0.02 s at every CLI start
         points = generate_bar((L, L, L), (n, n, n), "hexahedron").points
         u0 = 1e-4 * CELL * np.random.default_rng(0).standard_normal(points.shape)
         run = Run(f"spring compression 20 % {n}^3", name, "implicit_euler", dt, expected, outcome_in(*allowed))
