@@ -1,7 +1,7 @@
 """tensormass: symbolic tensor-mass kernels (C and numba) and a small implicit runtime.
 
     import tensormass as tm
-    k = tm.load_kernel("tetra", "stvk", "gauss1", backend="numba")
+    k = tm.load_kernel("tetra", "stvk", "gauss1")          # C where a compiler is found, else numba
     summary = tm.Simulation(tm.Scene.from_toml("beam.toml")).run()
     # a run the health monitor does not trust raises tm.RunStopped (its .summary says why)
 

@@ -20,10 +20,11 @@ from __future__ import annotations
 
 from .protocol import KERNEL_FUNCTIONS, METADATA_KEYS, Backend, BackendError, check_metadata
 from .c import BACKEND as _c
+from .c.loader import default_backend
 from .numba import BACKEND as _numba
 
 __all__ = ["Backend", "BackendError", "KERNEL_FUNCTIONS", "METADATA_KEYS", "BACKENDS", "REGISTRY",
-           "check_metadata", "get", "names"]
+           "check_metadata", "default_backend", "get", "names"]
 
 REGISTRY = {b.name: b for b in (_numba, _c)}
 BACKENDS = tuple(REGISTRY)

@@ -13,7 +13,7 @@ from ..generator import GENERATOR_VERSION     # a constant: generator/__init__.p
 METADATA_KEYS = (
     "name", "element", "law", "quadrature", "dim", "n_nodes", "n_points", "n_constants",
     "n_dofs", "dofs_per_node", "point_stride", "point_fields", "material_offset",
-    "parameters", "requires_positive_J", "recompute", "ops", "templates", "stress_record",
+    "parameters", "requires_positive_J", "quadratic_energy", "recompute", "ops", "templates", "stress_record",
 )
 
 # The entry points every loaded kernel provides (signatures: see the templates);
@@ -72,6 +72,11 @@ class Backend:
         """The metadata dict of a generated file (BackendError when it has none): the folder's
         loader.read_metadata(path)."""
         return importlib.import_module(f"{type(self).__module__}.loader").read_metadata(path)
+
+    def prepare(self, paths, cache: Path, writable=None) -> None:
+        """Make several generated files ready to load before they are loaded one by one: a backend
+        that compiles files into libraries builds the missing ones at once (one compiler per core).
+        Optional; by default nothing (numba compiles each function on its first call)."""
 
     def load(self, path: Path, cache: Path, writable=None):
         """The kernel in a generated file: an object with METADATA (dict) and the callables of

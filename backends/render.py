@@ -27,7 +27,8 @@ def metadata(ir, backend) -> dict:
     G: the shape gradients, node-major, G[i][b] at + i * dim + b); the material
     constants start at material_offset. Recompute kernels store rest coordinates instead
     (point_stride 0, no point fields); discrete kernels (springs) their rest measure v and the rest
-    positions relative to node 0 (no G). stress_record: the layout of the stress kernel's
+    positions relative to node 0 (no G). quadratic_energy: W is a homogeneous quadratic in grad u
+    (K constant, f = -K u: the runtime assembles K once). stress_record: the layout of the stress kernel's
     per-point record ({"size", "offsets": {v, W, F, P(, P33)}}, generator.kernel_body)."""
     return {
         "name": ir.name,
@@ -45,6 +46,7 @@ def metadata(ir, backend) -> dict:
         "material_offset": ir.material_offset,
         "parameters": list(ir.parameters),
         "requires_positive_J": bool(ir.requires_positive_J),
+        "quadratic_energy": bool(ir.quadratic_energy),
         "recompute": bool(ir.recompute),
         "ops": dict(sorted(ir.ops.items())),
         "templates": backend.templates_hash()[:16],

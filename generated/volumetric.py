@@ -49,11 +49,11 @@ def stvk(theta, lam, mu):
 
 
 SPLITS = {
-    'hooke': ('lam', 'measure_dilatation', 'af3bef92847763c0'),
-    'mooney_rivlin': ('kappa', 'measure_volume', '96ded78d769161fe'),
-    'neohookean': ('lam', 'measure_volume', '8f04a27be1438dfa'),
-    'stable_neohookean': ('lam', 'measure_volume', '3e0fbf371b72906c'),
-    'stvk': ('lam', 'measure_green_dilatation', '5f0fe4ddc860be3b'),
+    'hooke': ('lam', 'measure_dilatation', '7cf4e6f3f3d85c26'),
+    'mooney_rivlin': ('kappa', 'measure_volume', '6d20033e3474031b'),
+    'neohookean': ('lam', 'measure_volume', '7023b8f971f20cea'),
+    'stable_neohookean': ('lam', 'measure_volume', '690d9601b0ba9a28'),
+    'stvk': ('lam', 'measure_green_dilatation', '55dec8e0e9866fd3'),
 }
 
 FUNCTIONS = {

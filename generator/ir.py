@@ -112,6 +112,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         dim=dim, n_nodes=n, n_points=rule.n_points,
         parameters=tuple(law.parameters),
         requires_positive_J=law.requires_positive_J,
+        quadratic_energy=law_name in laws_pkg.names() and laws_pkg.is_quadratic(law_name),
         affine_edges=_midside_edges(ref) if quadrature == EXACT else (),
         point_stride=0 if recompute else stride,
         material_offset=len(names),

@@ -44,6 +44,7 @@ class KernelIR:
     source: str = "continuum"    # the energy: a law's W(F), "discrete" (generator/discrete.py: nodal positions)
     #                              or "shell" (generator/shell.py: nodal displacements and rotations)
     dofs: int = 0                # unknowns per node; 0: the space dimension (solids)
+    quadratic_energy: bool = False   # W homogeneous quadratic in grad u: K constant and f = -K u
 
     @property
     def dofs_per_node(self) -> int:

@@ -16,8 +16,6 @@ them once per element or node: runtime.assembly.volumetric).
 """
 from __future__ import annotations
 
-import hashlib
-import inspect
 import random
 from dataclasses import dataclass
 from functools import lru_cache
@@ -48,10 +46,6 @@ class VolumetricSplit:
         return self.U, sp.diff(self.U, THETA), sp.diff(self.U, THETA, 2)
 
 
-def law_source_hash(law) -> str:
-    return hashlib.sha256(inspect.getsource(inspect.getmodule(law.energy)).encode()).hexdigest()[:16]
-
-
 def _random_F(rng) -> sp.Matrix:
     """A deformation gradient near I with exact rational entries (det F > 0, 2 t - 1 > 0)."""
     return sp.eye(3) + sp.Matrix(3, 3, lambda i, j: sp.Rational(rng.randint(-20, 20), 100))
@@ -73,7 +67,7 @@ def split(law_name: str) -> VolumetricSplit:
         for name, (measure, representative) in MEASURES.items():
             U = sp.simplify(V.xreplace(dict(zip(F, representative(THETA)))))
             if _agrees(V, U, F, measure, samples, values):
-                return VolumetricSplit(law.name, p, name, U, law_source_hash(law))
+                return VolumetricSplit(law.name, p, name, U, laws_pkg.source_hash(law))
     raise SplitError(f"law {law.name!r}: no parameter of {', '.join(law.parameters)} scales a part of W that "
                      f"depends on F only through a volume measure ({', '.join(MEASURES)}); the locking-free "
                      "formulations need one")

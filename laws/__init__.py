@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import inspect
 import importlib.util
 import os
 import pkgutil
@@ -31,7 +32,7 @@ from .base import DiscreteLaw, Law, LawError, lame_from_E_nu
 
 __all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names", "shell_names",
            "is_discrete", "is_shell", "is_quadratic", "measure_names", "kernel_law", "load_file", "user_law",
-           "UserLaw", "SEARCH_PATH"]
+           "UserLaw", "SEARCH_PATH", "source_hash"]
 
 SEARCH_PATH = "TENSORMASS_LAWS"      # folders of law files or .py files, separated by os.pathsep
 
@@ -82,7 +83,7 @@ def _builtin() -> dict[str, Law]:
         if info.name.startswith("_") or info.name == "base":
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
-        law = getattr(module, "LAW", None)
+        law = vars(module).get("LAW")         # not getattr: sympy_lazy would import sympy to look
         if isinstance(law, Law):
             found[law.name] = law
     return dict(sorted(found.items()))
@@ -248,6 +249,13 @@ def kernel_law(name: str) -> Law:
     if name in MEASURES:
         return MEASURES[name][0]
     return get(name)
+
+
+def source_hash(law: Law) -> str:
+    """sha256 (16 hex digits) of the source of the file defining a law's energy: what a committed
+    table derived from the law (generated/volumetric.py) is checked against."""
+    module = sys.modules[law.energy.__module__]
+    return hashlib.sha256(inspect.getsource(module).encode()).hexdigest()[:16]
 
 
 @lru_cache(maxsize=None)

@@ -5,7 +5,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-import sympy as sp
+
+from . import sympy_lazy as sp
 
 
 class LawError(ValueError):

@@ -27,13 +27,13 @@ Parameters: E, nu, thickness (h).  The option `corotational` (default 1) is the 
 the kernel in the co-rotational formulation, 0 uses it as it is (small rotations: linear plates).
 """
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Callable
 
-import sympy as sp
-
+from . import sympy_lazy as sp
 from .base import DiscreteLaw, LawError
 
-DRILLING = sp.Rational(1, 1000)
+DRILLING = Fraction(1, 1000)      # exact: sympy reads it as Rational(1, 1000)
 ELEMENT = "shell"
 
 

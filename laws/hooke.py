@@ -3,7 +3,7 @@
 Small strains only (< ~10 %): eps is not invariant under rotation, so a rigidly
 rotated body feels spurious ("ghost") forces.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law, lame_from_E_nu
 

@@ -13,7 +13,7 @@ element is its rest volume.  Each is written as a parameter-free "law" so that t
 its kernels (energy = integral of theta, forces, Hessian) like any law's; they are not materials:
 laws.names() does not list them and a scene cannot choose them.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law
 

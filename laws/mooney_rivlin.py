@@ -6,7 +6,7 @@ Small-strain shear modulus mu = 2 (C10 + C01), bulk modulus kappa. From E and nu
 we split mu evenly (C10 = C01 = mu/4) and take kappa = lam + 2 mu / 3.
 Undefined for J <= 0.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law, lame_from_E_nu
 

@@ -8,7 +8,7 @@
   No spring network reproduces a given E and nu on an unstructured mesh: measure what you get.
 Damping: Rayleigh beta (solver.rayleigh) damps every spring along its axis with d = beta k.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .. import elements
 from . import springs

@@ -2,7 +2,7 @@
 
 I1 = tr(F^T F), J = det F. Undefined for J <= 0: kernels flag inverted elements.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law, lame_from_E_nu
 

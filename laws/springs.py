@@ -30,7 +30,7 @@ Stiffness rules (named parameter conversions; G = E / (2 (1 + nu))):
 """
 from __future__ import annotations
 
-import sympy as sp
+from . import sympy_lazy as sp
 
 EDGE, FACE_DIAGONAL, INNER_DIAGONAL = "edge", "face_diagonal", "inner_diagonal"
 

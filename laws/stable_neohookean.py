@@ -6,7 +6,7 @@ chosen so that the rest state is stress free and the tangent at rest equals
 Hooke's for the user's lam and mu (the tests check both). A constant is
 subtracted so that W(I) = 0.
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law, lame_from_E_nu
 

@@ -3,7 +3,7 @@
 W = lam/2 (tr E)^2 + mu tr(E^2), E = (F^T F - I)/2. Rotation invariant, but it
 softens and collapses under strong compression (it has no barrier at J = 0).
 """
-import sympy as sp
+from . import sympy_lazy as sp
 
 from .base import Law, lame_from_E_nu
 

@@ -13,6 +13,9 @@ class CBackend(Backend):
     suffix = ".c"
     folder = Path(__file__).resolve().parent
 
+    def prepare(self, paths, cache: Path, writable=None) -> None:
+        loader.build_missing(paths, cache, writable=writable)
+
     def load(self, path: Path, cache: Path, writable=None):
         return loader.load_source(path, cache, writable=writable)
 

@@ -22,10 +22,9 @@ from threadpoolctl import ThreadpoolController, threadpool_limits
 import scipy.sparse as sp
 from numba import njit
 
-from ... import laws
 from ..base import parallel as _parallel
 from ..kernels.fused import block_positions
-from .pattern import SparsePattern, _node_tables  # noqa: F401  (SparsePattern: re-exported)
+from .pattern import SparsePattern  # noqa: F401  (re-exported)
 from ..base.errors import ElementError, InvertedElementError, TensormassError
 
 __all__ = ["Assembler", "assemble", "project_psd", "SparsePattern"]
@@ -408,7 +407,7 @@ class Assembler:
         # their K is assembled once (again after a law switch) instead of at every call.
         # (Not for solvers that load no stiffness kernel: explicit scenes never build one.)
         needs_K = "stiffness" in getattr(model, "outputs", ("stiffness",))
-        self.constant = [needs_K and laws.is_quadratic(p.law) for p in model.parts]
+        self.constant = [needs_K and getattr(p.kernel, "quadratic_energy", False) for p in model.parts]
         self.time = 0.0
         self._pools = {"f": [], "K": []}
         self.refresh()

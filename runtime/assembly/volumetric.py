@@ -55,13 +55,12 @@ def volumetric_functions(law_name: str):
 
     From the committed generated/volumetric.py while the law file is unchanged; a new or edited
     law is split now (sympy) and the same expressions are compiled in memory."""
-    from ...generator.volumetric import law_source_hash
     law = laws.get(law_name)
     try:
         from ...generated import volumetric as table
     except ImportError:
         table = None
-    if table is not None and law_name in table.SPLITS and table.SPLITS[law_name][2] == law_source_hash(law):
+    if table is not None and law_name in table.SPLITS and table.SPLITS[law_name][2] == laws.source_hash(law):
         parameter, measure, _ = table.SPLITS[law_name]
         return parameter, measure, table.FUNCTIONS[law_name]
     return _derived(law_name)

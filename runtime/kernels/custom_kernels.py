@@ -46,6 +46,8 @@ class Kernel(Protocol):
       stiffness(D, u) -> (n, n_dofs, n_dofs)           K = d2W/du2
       forces_and_stiffness(D, u) -> (f, K)
     Optional
+      quadratic_energy: True when energy(D, u) = 1/2 u.K.u with a constant K (a linear kernel): the
+      assembler then builds K once and takes the forces and energy from it (default False).
       min_det_F(D, u, cells=None), inverted(D, u, cells=None): the health monitor's and the
       positive-J laws' inversion checks (a kernel without them is not checked for inversion);
       raise runtime.base.errors.ElementError subclasses with part-local element ids for bad elements.

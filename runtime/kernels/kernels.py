@@ -57,6 +57,9 @@ class Kernel:
         self.material_offset = int(meta["material_offset"])
         # "recompute" kernels (a generator option) keep rest coordinates in D instead of G.
         self.recompute = bool(meta["recompute"])
+        # W homogeneous quadratic in grad u (Hooke): K is constant and f = -K u, so the assembly
+        # builds K once and takes the forces and energy from it.
+        self.quadratic_energy = bool(meta["quadratic_energy"])
         # What stress() writes per element and point: {"size", "offsets": {v, W, F, P(, P33)}}
         # (generator.kernel_body.stress_record, exported by every generated file).
         self.stress_record = {"size": int(meta["stress_record"]["size"]),
@@ -382,11 +385,26 @@ def backend_of(name: str):
 
 
 @lru_cache(maxsize=None)
-def load_kernel(element: str, law: str, quadrature: str, backend: str = "numba") -> Kernel:
-    """The kernel for (element, law, quadrature): committed, cached, or generated now."""
+def load_kernel(element: str, law: str, quadrature: str, backend: str | None = None) -> Kernel:
+    """The kernel for (element, law, quadrature): committed, cached, or generated now.  backend:
+    "c" or "numba"; None: a scene's default, C where a compiler is found (it compiles a kernel in
+    about a second; numba takes 6 to 40 s per function at its first call)."""
+    if backend is None:
+        backend = backends.default_backend()
     target = backend_of(backend)
     name = f"{element}_{law}_{quadrature}"
     return _load(target, kernel_source(element, law, quadrature, backend), name)
+
+
+def prepare_kernels(triples, backend: str) -> None:
+    """Get several (element, law, quadrature) kernels ready before they are loaded one by one: the
+    C backend compiles the missing libraries at once, one compiler per core (a scene's first run)."""
+    target = backend_of(backend)
+    sources = [kernel_source(*triple, backend) for triple in sorted(set(triples))]
+    try:
+        target.prepare(sources, cache_dir(), writable=writable_cache_dir)
+    except backends.BackendError as error:
+        raise TensormassError(str(error)) from None
 
 
 def kernel_source(element: str, law: str, quadrature: str, backend: str) -> Path:

@@ -277,6 +277,7 @@ class Model:
     # -- parts ---------------------------------------------------------------------------------
     def _build_parts(self) -> list:
         index = assign_materials(self.mesh, self.materials)
+        self._prepare_kernels(index)
         offsets = np.concatenate([[0], np.cumsum([len(b) for b in self.mesh.blocks])])
         parts = []
         for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
@@ -313,6 +314,18 @@ class Model:
             if formulated is not None:
                 self._pending_couplings.append(formulated)
         return parts
+
+    def _prepare_kernels(self, index) -> None:
+        """Get the generated kernels the parts will load ready at once (C: the missing libraries
+        compiled in parallel, one compiler per core), the formulations' measure kernels included."""
+        triples = set()
+        for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
+            for name in reachable_laws(law, self.adapt):
+                if _custom.registered_kernel(element, name, quad) is None:
+                    triples.add((element, name, quad))
+            if any(getattr(self.materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
+                triples.add((element, volumetric_functions(law)[1], quad))
+        _kernels.prepare_kernels(triples, self.solver.backend)
 
     def _formulated(self, element, law, members, reach):
         """The cells of this part a locking-free formulation models (runtime.assembly.volumetric), or None."""
@@ -594,7 +607,7 @@ class Model:
         quadratic in grad u under a solver that assembles K: the assembly builds its constant K once
         (runtime.assembly.assembly, Assembly.constant) and takes its energy and forces from K, so
         only its stiffness runs."""
-        if "stiffness" in self.outputs and laws.is_quadratic(part.law):
+        if "stiffness" in self.outputs and getattr(part.kernel, "quadratic_energy", False):
             return ("stiffness",)
         return tuple(self.outputs)
 

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ... import elements as _element_types
-from ...generator.catalogue import entries, quadratures
+from ..kernels import catalogue
 from . import resources
 from ..base.dofs import dofs_per_node as _dofs_per_node
 from ..base.errors import SceneError, TensormassError
@@ -144,10 +144,10 @@ def catalogue_check(key, element, law, quadrature):
         raise SceneError(f"{key}: law {law!r} is a discrete model defined on {', '.join(_laws.get(law).elements)} "
                          f"cells, not {element}")
     try:
-        entries(elements=[element], law_names=[law], quadrature_names=[quadrature])
+        catalogue.check(element, law, quadrature)
     except ValueError:
         try:
-            available = ", ".join(quadratures(element, law))
+            available = ", ".join(catalogue.quadratures(element, law))
         except Exception:  # noqa: BLE001 - only for the message
             available = "?"
         raise SceneError(f"{key}: quadrature {quadrature!r} is not available for {element} with law "

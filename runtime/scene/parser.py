@@ -8,7 +8,7 @@ from pathlib import Path
 from ... import elements as _element_types
 from ... import laws
 from ...backends import BACKENDS
-from ...generator.catalogue import entries
+from ..kernels import catalogue
 from ..base.errors import SceneError
 from ..base import integrator_kinds
 from ..base.paths import scene_path
@@ -338,7 +338,7 @@ class Parser(ValueParser):
             _catalogue_check(f"{key}.quadrature", region, law, quadrature)
             return
         try:
-            entries(law_names=[law], quadrature_names=[quadrature])
+            catalogue.check(None, law, quadrature)
         except ValueError as exc:
             raise SceneError(f"{key}.quadrature: {exc}") from None
 

@@ -55,21 +55,19 @@ many times longer; the printed estimate says how many it assumed.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from ... import elements as _elements
-from ... import generated
 from ..solve import pardiso as _pardiso
 from ..base import integrator_kinds
 from ..base.errors import TensormassError
+from ..kernels import catalogue
 from ..mesh.solids import LAYERS as BALL_LAYERS
 from .types import Material, Solver
 from ..solve.choices import (AUTO_BAND_WORK_PER_NNZ, AUTO_DIRECT_BELOW, BAND_MAX_ENTRIES, DIRECT_LIMIT,
@@ -357,20 +355,9 @@ def _layers(points, cells: dict, dim: int) -> float:
 # ============================================================================== the catalogue
 
 
-@lru_cache(maxsize=1)
-def _manifest() -> dict:
-    """generated/manifest.json entries by (element, law, quadrature)."""
-    path = Path(generated.__file__).resolve().parent / "manifest.json"
-    try:
-        entries = json.loads(path.read_text(encoding="utf-8"))["entries"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise TensormassError(f"cannot read the kernel catalogue {path}: {exc}") from None
-    return {(e["element"], e["law"], e["quadrature"]): e for e in entries.values()}
-
-
 def _entry(element, law, quadrature) -> dict:
     """The manifest entry; the largest of the element's entries when the combination is not listed."""
-    table = _manifest()
+    table = catalogue.committed()
     entry = table.get((element, law, quadrature))
     if entry is not None:
         return entry

@@ -3,6 +3,7 @@ commands' stubs say what the full parsers say, and a run writes nothing into the
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -154,3 +155,52 @@ def test_warm_up_calls_only_the_outputs_the_run_calls(monkeypatch):
     assert {law for law, _ in called} == {"hooke", "stvk"}
     assert sorted({k for k in called if k[0] == "hooke"}) == [("hooke", "stiffness")]
     assert sorted({k for k in called if k[0] == "stvk"}) == [("stvk", name) for name in sorted(model.outputs)]
+
+
+# Scenes whose kernels are all committed: an implicit Hooke bar (the constant-K path), a
+# neo-Hookean block under mean dilatation (the volumetric split), a shell plate, a spring lattice.
+_COMMITTED_RUNS = r'''
+import sys, tomllib
+from pathlib import Path
+from tensormass import Scene, Simulation
+root = Path(sys.argv[1])
+changes = {
+    "cantilever_tetra.toml": {"mesh": {"cells": [6, 2, 2]}},
+    "soft_block_squeezed.toml": {"mesh": {"cells": [3, 3, 2], "element": "hexahedron"}, "solver": {"steps": 1},
+                                 "material": {"formulation": "mean_dilatation", "quadrature": "gauss2"}},
+    "shells/plate_clamped_pressure.toml": {"mesh": {"cells": [4, 4]}},
+    "hybmss_block_squeezed.toml": {"mesh": {"cells": [3, 3, 3]}, "solver": {"steps": 1}},
+}
+for name, change in changes.items():
+    data = tomllib.loads((root / name).read_text())
+    for table, values in change.items():
+        (data[table][0] if table == "material" else data[table]).update(values)
+    data.pop("probe", None)
+    data.pop("output", None)
+    summary = Simulation(Scene.from_dict(data, base_dir=root)).run()
+    assert summary["status"] == "ok", (name, summary["status"])
+print(sorted(m for m in ("sympy", "jinja2") if m in sys.modules))
+'''
+
+
+def test_a_run_of_committed_kernels_imports_neither_sympy_nor_jinja2(tmp_path):
+    """Scene checks read the committed catalogue (generated/manifest.json), the law files import
+    sympy only when an energy is built, and the kernels' metadata says which laws have a constant
+    stiffness: a run of committed kernels never loads the symbolic pipeline."""
+    root = Path(__file__).resolve().parents[2] / "examples"
+    done = subprocess.run([sys.executable, "-c", _COMMITTED_RUNS, str(root)], capture_output=True,
+                          text=True, timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_the_command_line_run_imports_neither_sympy_nor_jinja2(tmp_path):
+    """`tensormass run` on an example (outputs written) under -X importtime."""
+    scene = Path(__file__).resolve().parents[2] / "examples" / "cantilever_tetra.toml"
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "tensormass", "run", str(scene),
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    imported = {line.split("|")[-1].strip().split(".")[0]
+                for line in done.stderr.splitlines() if line.startswith("import time:")}
+    assert "numba" in imported                      # the report did list the run's imports
+    assert not imported & {"sympy", "jinja2"}, sorted(imported & {"sympy", "jinja2"})
