@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import os
 import sys
 import tempfile
@@ -30,7 +29,7 @@ def _rows(path):
 
 
 def run(workers: int, benchmarks, quick: bool) -> dict:
-    from .reports.accuracy import run_accuracy
+    from .reports.accuracy import run_accuracy      # deferred: meshio, 0.13 s that the other `tensormass bench` commands skip
     with tempfile.TemporaryDirectory(prefix="tm-bench-batch-") as tmp:
         run_accuracy(Path(tmp) / "warm", quick=True, benchmarks=benchmarks, progress=None)     # caches
         times = {}

@@ -35,14 +35,16 @@ from .. import generated
 from ..backends import BACKENDS
 from ..generator import GENERATOR_VERSION
 from ..runtime.base.errors import EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, RunStopped, TensormassError
+from ..runtime.base.cache import writable_cache_dir
 from ..runtime.base.files import check_writable
 from .commands import add_commands
 
 # The commands whose modules import sympy, numba or the runtime at the top. Each one's parser is
 # built only when the command line names it (or in full for the docs: build_parser()); otherwise a
 # stub with the same help lists it, so `tensormass --help` and `tensormass run` start without them.
-# Measured with `python -X importtime`, 2 shared cores: generate (generator, sympy) ~1.9 s,
-# bench (numba, kernels, runtime) ~3.3 s, report ~3.4 s, batch ~0.5 s, plot ~0.4 s.
+# Measured with `python -X importtime`, 2 shared cores: `tensormass --help` imports this module in
+# 0.19 s; the commands' modules add generate (generator, sympy) 0.55 s, bench (numba, kernels,
+# runtime) 1.9 s, report 0.7 s, batch 0.17 s, plot 0.2 s.
 # name -> (module, function that adds its parser, help)
 DEFERRED = {
     "generate": (".cli", "add_generate_command", "generate element x law x quadrature kernels"),
@@ -69,8 +71,8 @@ def _names(values, known, kind):
 
 
 def cmd_list(args) -> int:
-    from .. import laws                    # sympy (~1.4 s): only for the list of law names
-    from ..generator.elements import ELEMENTS
+    from .. import laws                    # deferred: 0.01 s, only for the list of law names
+    from ..generator.elements import ELEMENTS      # deferred: sympy, 0.52 s
     manifest = json.loads((committed_dir() / "manifest.json").read_text())["entries"]
     rows = [("entry", "points", "constants", "ops energy", "ops forces", "ops f+K", "backends")]
     for key, r in manifest.items():
@@ -84,12 +86,11 @@ def cmd_list(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from ..generator import shape_tables, volumetric             # sympy, jinja2: ~1.9 s, generate only
+    from ..generator import shape_tables, volumetric             # deferred: sympy, jinja2, 0.55 s
     from ..generator.catalogue import catalogue_laws, entries
     from ..generator.elements import ELEMENTS
     from ..generator.pipeline import generate_all
     from .. import laws
-    from ..runtime.base.cache import writable_cache_dir
     from ..runtime.kernels.kernels import kernel_folder
     # --law takes names and law files (FILE.py: a law outside the package, laws.load_file);
     # no --law: the whole catalogue of built-in laws, the formulations' volume-measure kernels too
@@ -140,7 +141,7 @@ def _output_folder(path) -> Path:
 
 def check(selected, backends) -> int:
     """Regenerate into a temporary folder and compare byte for byte with generated/."""
-    from ..generator import shape_tables, volumetric             # sympy, jinja2: ~1.9 s, generate only
+    from ..generator import shape_tables, volumetric             # deferred: sympy, jinja2, 0.55 s
     from ..generator.pipeline import generate_all
     committed = committed_dir()
     with tempfile.TemporaryDirectory() as tmp:

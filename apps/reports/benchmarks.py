@@ -442,7 +442,7 @@ def cube_run(kind, element, cells, law="hooke", quadrature="gauss2", theta=TORSI
     z torque of the top reactions about that axis (moment arms from the undeformed positions).  The
     reaction at a prescribed dof is -f_int = dW/du (assembly.assemble returns f_int = -dW/du).
     """
-    # deferred: model, assembly and the simulation stack cost ~0.2 s at every CLI start
+    # deferred: model, assembly, simulation (scipy.sparse, pyamg), 0.50 s skipped by `tensormass report --help` (0.7 s)
     from ...runtime.assembly.assembly import assemble
     from ...runtime.model.model import Model
     from ...runtime.run.simulation import Simulation

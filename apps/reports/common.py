@@ -24,7 +24,8 @@ def analytic_tip(size=SIZE, E=E_MOD, nu=NU, rho=RHO, g=G) -> tuple:
 
 def measure(scene, trace=True) -> tuple:
     """(Summary, tracemalloc peak in MB or nan, Simulation) of one run of a validated scene."""
-    from ...runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
+    # deferred: the simulation stack (scipy.sparse, pyamg), 0.56 s skipped by `tensormass report --help` (0.7 s)
+    from ...runtime.run.simulation import Simulation
     if trace:
         tracemalloc.start()
     try:

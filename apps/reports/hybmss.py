@@ -61,6 +61,7 @@ from .benchmarks import deformed_volume
 from .common import benchmark_row as _row
 from .common import cells_label as _cells
 from .common import run_dict as _run
+from ...runtime.scene.scene import Scene
 
 __all__ = ["hybmss", "hybmss_scene", "MODELS", "THESIS", "analytic"]
 
@@ -225,9 +226,9 @@ def _singular_at_rest(data) -> bool:
     volume term (kappa = 0), so its lattice can be singular too and the runtime would not say so."""
     import scipy.sparse.linalg as spla
 
+    # deferred: model and assembly (scipy.sparse, pyamg), 0.43 s skipped by `tensormass report --help` (0.7 s)
     from ...runtime.assembly.assembly import assemble
     from ...runtime.model.model import Model
-    from ...runtime.scene.scene import Scene
     m = Model.from_scene(Scene.from_dict(copy.deepcopy(data)))
     _, _, K = assemble(m, np.zeros(m.n_dofs))
     free = np.asarray(m.free_dofs)

@@ -20,12 +20,18 @@ import numpy as np
 
 from .common import benchmark_row as _row
 from .common import measure as _measure
+from ...runtime.base.errors import TensormassError
+from ...runtime.scene.scene import Scene
 
 __all__ = ["incompressible", "INCOMPRESSIBLE"]
 
 INCOMPRESSIBLE = {"nu": 0.499, "formulations": ["displacement", "mean_dilatation"]}
 FULL = {"organ": [[0.012, 2.2], [0.008, 2.2]], "cantilever": [48, 8, 8], "felupe_max_dofs": 15_000}
 QUICK = {"organ": [[0.012, 1.0]], "cantilever": [12, 2, 4], "felupe_max_dofs": 15_000}
+
+
+# bench_organ and bench_steps are imported inside the functions: they load the simulation stack
+# (scipy.sparse, pyamg), 0.47 s skipped by `tensormass report --help` (0.7 s) (python -X importtime, 2 shared cores)
 
 
 def _organ_text(size, scale, nu, formulation):
@@ -70,8 +76,6 @@ def _felupe(model, E, nu, tol):
 
 
 def _one(text, probe, label, progress):
-    from ...runtime.base.errors import TensormassError
-    from ...runtime.scene.scene import Scene
     scene = Scene.from_string(text)
     t0 = time.perf_counter()
     try:

