@@ -1,12 +1,31 @@
 """Shared test helpers: random well-shaped elements and finite differences."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from tensormass.generator.elements import element as reference
 from tensormass.runtime.base.samples import random_elements
 
-__all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error"]
+__all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error", "FULL_CATALOGUE",
+           "catalogue_selection"]
+
+# The checks that run over the catalogue (finite differences, patch tests, C = numba, ...) take a
+# sample covering every element type, law and quadrature; CI's catalogue step sets
+# TENSORMASS_FULL_CATALOGUE=1 and runs them on every entry (pytest -m catalogue).
+FULL_CATALOGUE = os.environ.get("TENSORMASS_FULL_CATALOGUE") == "1"
+
+
+def catalogue_selection(entries, sample) -> list:
+    """Every entry with TENSORMASS_FULL_CATALOGUE=1, else those named in sample (all of which exist)."""
+    entries = list(entries)
+    if FULL_CATALOGUE:
+        return entries
+    chosen = [e for e in entries if e.name in sample]
+    missing = sorted(set(sample) - {e.name for e in chosen})
+    assert not missing, f"sample entries not in the catalogue: {missing}"
+    return chosen
 
 
 def reference_nodes(name: str) -> np.ndarray:

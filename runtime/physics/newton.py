@@ -67,6 +67,11 @@ class Context:
         self.residual = None
         self._cell_size = None
 
+    def warm_up_solver(self) -> None:
+        """The linear solver's numba loops for this system, loaded before the first step (runs that
+        solve with a stiffness only: an explicit run never calls it)."""
+        self.linear.warm_up(self.system.structure())
+
     def cell_size(self) -> np.ndarray:
         """Per dof, the largest cell (bounding-box diagonal) at its node: lengths for the residual floor."""
         if self._cell_size is None:

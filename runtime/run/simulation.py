@@ -260,6 +260,8 @@ class Simulation:
         self.ctx = ctx = Context(model)
         model.warm_up()
         ctx.asm.warm_up()
+        if "stiffness" in model.outputs:
+            ctx.warm_up_solver()
         self.integrator = make_integrator(ctx)
         if self._u0 is not None:
             ctx.u = self._u0.copy()
@@ -469,6 +471,8 @@ class Simulation:
                       if colours is not None else None)
         model.warm_up()
         ctx.asm.warm_up()
+        if "stiffness" in model.outputs:
+            ctx.warm_up_solver()
         ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel() if u is None else u
         ctx.v = interpolate_nodal(old.v.reshape(-1, dim), parents).ravel() if v is None else v
         ctx.t = old.t

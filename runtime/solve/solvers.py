@@ -310,6 +310,19 @@ class LinearSolver:
             return "cg" if self.method in ("cg", "amg") else "direct"
         return "cg" if self.choose(A) in ("cg", "amg") else "direct"
 
+    def warm_up(self, A) -> None:
+        """Load (or compile, once per machine) the numba loops of the method chosen for A's pattern
+        before the first solve: setup time, not the first step's.  A direct solve compiles no CG
+        loops (the fallbacks of a breakdown compile theirs if they ever run); A None: every path."""
+        if A is None:
+            warm_up()
+            return
+        kind = self.choose(A)
+        if kind == "band":
+            warm_up(A.indices.dtype, A.indptr.dtype, (("band", "ic"),))
+        elif kind == "cg":
+            warm_up(A.indices.dtype, A.indptr.dtype, (("cg", "jacobi" if self.preconditioner == "jacobi" else "ic"),))
+
     # -- solve --------------------------------------------------------------------------------
     def solve(self, A, b: np.ndarray, x0: np.ndarray | None = None):
         """(x, iterations); raises TensormassError on a singular system or NaN/Inf."""
@@ -502,20 +515,22 @@ def _lu(A, b):
 
 
 _warm = set()
+# The solver paths that run numba loops, as (method, preconditioner); PARDISO, multigrid, SuperLU
+# and the refinement of a kept factor run none.
+NUMBA_PATHS = (("band", "ic"), ("cg", "ic"), ("cg", "jacobi"))
 
 
-def warm_up(index_dtype=np.int32, pointer_dtype=np.int32) -> None:
-    """Load (or compile) the numba loops of every solver path for these index types, once per
+def warm_up(index_dtype=np.int32, pointer_dtype=np.int32, paths=NUMBA_PATHS) -> None:
+    """Load (or compile) the numba loops of these solver paths for these index types, once per
     process: setup time, like the kernels' and the scatter loops' warm-up, not the first solve."""
-    key = (np.dtype(index_dtype).str, np.dtype(pointer_dtype).str)
-    if key in _warm:
-        return
     A = sp.csr_matrix((np.array([2.0, -1.0, -1.0, 2.0]), np.array([0, 1, 0, 1], dtype=index_dtype),
                        np.array([0, 2, 4], dtype=pointer_dtype)), shape=(2, 2))
     b = np.array([1.0, 0.5])
-    for method, preconditioner in (("band", "ic"), ("cg", "ic"), ("cg", "jacobi")):
-        LinearSolver(method, preconditioner=preconditioner, reuse=False).solve(A, b)
-    _warm.add(key)
+    for method, preconditioner in paths:
+        key = (method, preconditioner, np.dtype(index_dtype).str, np.dtype(pointer_dtype).str)
+        if key not in _warm:
+            LinearSolver(method, preconditioner=preconditioner, reuse=False).solve(A, b)
+            _warm.add(key)
 
 
 class ConstrainedSystem:
@@ -535,9 +550,14 @@ class ConstrainedSystem:
         self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
         self._fc = None                  # free/fixed block: built on first use (moving constraints only)
-        if free.size:
-            _, indices, indptr, _ = self.ff
-            warm_up(indices.dtype, indptr.dtype)
+
+    def structure(self):
+        """The matrix solve() hands the linear solver, with unit values (its choice of method reads
+        the pattern only); None with hanging nodes (P^T A P is formed at each solve) or no free dof."""
+        if self.hanging is not None or not self.free.size:
+            return None
+        _, indices, indptr, shape = self.ff
+        return sp.csr_matrix((np.ones(indices.size), indices, indptr), shape=shape)
 
     @property
     def fc(self):

@@ -121,6 +121,7 @@ def _generate(tmp, seed):
     return {p.relative_to(tmp): p.read_bytes() for p in sorted(tmp.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.heavy          # ~20 s of sympy in two processes; CI's generate --check also compares bytes
 def test_generation_is_deterministic_across_processes(tmp_path):
     a = _generate(tmp_path / "a", 1)
     b = _generate(tmp_path / "b", 12345)
@@ -152,7 +153,7 @@ def test_cli_generate_list_and_errors(tmp_path, capsys):
     assert main(["generate", "--element", "tetra", "--quadrature", "gauss9", "--out", str(tmp_path)]) == 2
 
 
-@pytest.mark.parametrize("backend", ["numba", "c"])
+@pytest.mark.parametrize("backend", [pytest.param("numba", marks=pytest.mark.heavy), "c"])
 def test_recompute_constants_mode_matches_precompute(backend):
     """The generator option constants="recompute" (rest coordinates in D) computes the same
     energy, forces and stiffness as the catalogue's precomputed shape gradients."""

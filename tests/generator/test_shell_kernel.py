@@ -189,6 +189,7 @@ def test_collinear_triangles_in_general_position_are_flagged(k):
         k.constants(X, E=E, nu=NU, thickness=H)
 
 
+@pytest.mark.heavy                  # numba compiles the shell kernel's functions for about 50 s cold
 def test_c_equals_numba():
     c = tm.load_kernel("shell", "cst_dkt", "exact", backend="c")
     nb = tm.load_kernel("shell", "cst_dkt", "exact", backend="numba")

@@ -25,7 +25,7 @@ def small_blocks(monkeypatch):
     monkeypatch.setattr(assembly, "BLOCK_BYTES", 1)
 
 
-def model_of(element="tetra", cells=(6, 3, 3), law="neohookean", quadrature="gauss1", backend="numba", adapt=()):
+def model_of(element="tetra", cells=(6, 3, 3), law="neohookean", quadrature="gauss1", backend="c", adapt=()):
     mesh = generate_bar(size=(1.0, 0.5, 0.5), cells=cells, element=element)
     return Model(mesh, [Material(law=law, quadrature=quadrature, E=E, nu=NU)], fixed=[CLAMP],
                  solver=Solver(backend=backend), adapt=list(adapt))

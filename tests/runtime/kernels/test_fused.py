@@ -28,6 +28,12 @@ CASES = [  # (mesh element, law, cells, size)
     ("hexahedron", "hooke", (3, 2, 2), (1.5, 1.0, 1.0)),
     ("mixed", "neohookean", (8, 2, 2), (4.0, 1.0, 1.0)),      # hex | wedge | pyramid | tetra parts, shared nodes
 ]
+# Every case with C; with numba, two cases by default (its first compile of a kernel takes 5 to 20 s)
+# and every case in CI's heavy step.
+NUMBA_DEFAULT = {("quad", "stvk"), ("wedge", "stable_neohookean")}
+BACKEND_CASES = [pytest.param(*case, backend, id=f"{case[0]}-{case[1]}-{backend}",
+                              marks=() if backend == "c" or case[:2] in NUMBA_DEFAULT else pytest.mark.heavy)
+                 for case in CASES for backend in ("numba", "c")]
 
 
 def _setup(element, law, cells, size, backend):
@@ -51,8 +57,7 @@ def _element_path(parts, pattern, U, dim, f, data):
         _scatter_matrix(data, Ke, pos, 1.0)
 
 
-@pytest.mark.parametrize("backend", ["numba", "c"])
-@pytest.mark.parametrize("element,law,cells,size", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
+@pytest.mark.parametrize("element,law,cells,size,backend", BACKEND_CASES)
 def test_fused_is_bit_identical_to_element_buffers_and_scatter(element, law, cells, size, backend):
     parts, pattern, U, dim = _setup(element, law, cells, size, backend)
     rng = np.random.default_rng(3)
