@@ -53,7 +53,7 @@ from pathlib import Path
 
 from ..runtime.base.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, RunInterrupted,
     RunStopped, SceneError, TensormassError)
-from .batch_table import PARTIAL_FORMAT, _PartialRows, check_table_path, is_batch_table, partial_path, write_table
+from .batch_table import PARTIAL_FORMAT, PartialRows, check_table_path, is_batch_table, partial_path, write_table
 from ..runtime.base.cache import cache_dir
 from .commands import ProgressBar
 
@@ -658,7 +658,7 @@ def run_batch(scenes, vary=(), workers=None, scheduler=None, out="batch.csv", st
     print(f"batch: {len(tasks)} task(s) ({len(scenes)} scene(s)) on {where}", file=stream)
     print(f"batch: cost: {study_cost(estimates, 1 if scheduler else workers)}", file=stream)
     start = time.perf_counter()
-    partial = _PartialRows(out, len(tasks))
+    partial = PartialRows(out, len(tasks))
     rows: list = [None] * len(tasks)
 
     def done(i, outcome):

@@ -202,7 +202,7 @@ def _jsonable(value):
     return value
 
 
-class _PartialRows:
+class PartialRows:
     """<out>.partial: a header line, then one JSON row per finished task, flushed per row."""
 
     def __init__(self, out: Path, n_tasks: int):

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from ..runtime.assembly.assembly import SparsePattern, _scatter_matrix, _scatter_vector
+from ..runtime.assembly.assembly import SparsePattern, scatter_matrix, scatter_vector
 from ..runtime.base.dofs import node_dofs
 from ..runtime.base.errors import TensormassError
 from ..runtime.kernels.fused import block_positions
@@ -108,8 +108,8 @@ def run_case(name, element, quadrature, n, backends=BACKENDS, repeats=REPEATS, p
             module.forces_and_stiffness(D, u, fe, Ke, flags)
             f.fill(0.0)
             data.fill(0.0)
-            _scatter_vector(f, fe, dofs)
-            _scatter_matrix(data, Ke, full, 1.0)
+            scatter_vector(f, fe, dofs)
+            scatter_matrix(data, Ke, full, 1.0)
 
         def fused():
             f.fill(0.0)

@@ -1,5 +1,5 @@
 """Setup-time benchmark of the sparsity pattern: runtime.assembly.pattern's numba build against the sort-based
-build it replaced (runtime.assembly.pattern._ReferencePattern), in the same run.
+build it replaced (runtime.assembly.pattern.ReferencePattern), in the same run.
 
     python -m tensormass.apps.bench_pattern [--repeats 5] [--json bench_pattern.json] [--quick]
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from ..runtime.assembly import assembly
 from ..runtime.base.files import write_json_atomic
-from ..runtime.assembly.pattern import SparsePattern, _ReferencePattern
+from ..runtime.assembly.pattern import SparsePattern, ReferencePattern
 from ..runtime.scene.scene import Scene
 from ..runtime.physics.newton import Context
 from ..runtime.model.model import Model
@@ -53,7 +53,7 @@ def scene_dict(element: str, cells) -> dict:
 def _implementation(name: str):
     """Assembler (and so Context) building the new pattern or the old one."""
     saved = assembly.SparsePattern
-    assembly.SparsePattern = SparsePattern if name == "new" else _ReferencePattern
+    assembly.SparsePattern = SparsePattern if name == "new" else ReferencePattern
     try:
         yield
     finally:
@@ -94,7 +94,7 @@ def run_pattern_bench(repeats: int = 5, quick: bool = False, progress=print) -> 
         dpn, n = model.dofs_per_node, model.n_dofs
         _check_same(model)                           # also compiles every numba loop
         case = {"cells": int(model.mesh.n_cells), "dofs": int(n)}
-        for name, cls in (("old", _ReferencePattern), ("new", SparsePattern)):
+        for name, cls in (("old", ReferencePattern), ("new", SparsePattern)):
             with _implementation(name):
                 case[f"pattern_{name}_s"] = _best(lambda: cls(tables, n, dpn), repeats)
                 case[f"assembler_{name}_s"] = _best(lambda: assembly.Assembler(model), repeats)

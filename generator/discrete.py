@@ -32,7 +32,7 @@ from .kernel_ir import KernelIR
 from .constants import hoist
 from .elements import element as get_element
 from .fragments import DEFAULT_MAX_OPS, Fragment, count_ops, eliminate, split
-from .kernel_body import (ARRAYS, FUSED_ARRAYS, KINDS, Assign, Comment, Declare, Flag, FlagIf, _Builder, ref,
+from .kernel_body import (ARRAYS, FUSED_ARRAYS, KINDS, Assign, Comment, Declare, Flag, FlagIf, BodyBuilder, ref,
                           stress_record)
 
 QUADRATURE = "discrete"          # the quadrature name of every discrete kernel: no integration points
@@ -155,7 +155,7 @@ def _input_hash(ref_el, law) -> str:
     return h.hexdigest()[:16]
 
 
-class _DiscreteBuilder(_Builder):
+class _DiscreteBuilder(BodyBuilder):
     """The statement trees of a discrete kernel: straight-line code per element, no point loop."""
 
     def __init__(self, ir):

@@ -113,7 +113,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         parameters=tuple(law.parameters),
         requires_positive_J=law.requires_positive_J,
         quadratic_energy=law_name in laws_pkg.names() and laws_pkg.is_quadratic(law_name),
-        affine_edges=_midside_edges(ref) if quadrature == EXACT else (),
+        affine_edges=midside_triples(ref) if quadrature == EXACT else (),
         point_stride=0 if recompute else stride,
         material_offset=len(names),
         material_names=material_names,
@@ -199,7 +199,7 @@ def _chain_rule(deriv):
     return {"forces": forces, "H": H, "K": K}
 
 
-def _midside_edges(ref):
+def midside_triples(ref):
     """(midside node, corner a, corner b) with a < b, from the element table."""
     t = ref.type
     return tuple((t.n_corners + m, min(e), max(e)) for m, e in enumerate(t.midside_edges))

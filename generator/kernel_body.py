@@ -151,7 +151,7 @@ q, i, j, r, s, c_ = (_i(n) for n in ("q", "i", "j", "r", "s", "c"))
 node, base = _i("node"), _i("base")
 
 
-class _Builder:
+class BodyBuilder:
     """Statement lists of one IR (see build_bodies)."""
 
     def __init__(self, ir):
@@ -335,5 +335,5 @@ class _Builder:
 
 def build_bodies(ir) -> dict:
     """kind -> the statements of one element (the body of the element loop) for every kernel."""
-    builder = _Builder(ir)
+    builder = BodyBuilder(ir)
     return {kind: builder.kernel(kind) for kind in KINDS}

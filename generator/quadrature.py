@@ -56,7 +56,7 @@ def _f(s: str) -> sp.Float:
 
 # ---------------------------------------------------------------- 1D rules
 @functools.cache
-def _line(n: int, alpha: int = 0):
+def gauss_line(n: int, alpha: int = 0):
     """n-point Gauss rule on [0, 1] for the weight (1 - t)**alpha.
 
     alpha > 0 absorbs the Jacobian of the collapsed (Duffy) maps below."""
@@ -75,7 +75,7 @@ def _line(n: int, alpha: int = 0):
 
 def _gauss_legendre(n: int):
     """n-point Gauss-Legendre rule on [-1, 1]."""
-    t, w = _line(n)
+    t, w = gauss_line(n)
     return tuple(_num(2 * x - 1) for x in t), tuple(_num(2 * v) for v in w)
 
 
@@ -140,13 +140,13 @@ def _tetra_symmetric():
 # ------------------------------------------------------ collapsed rules
 def _collapsed_triangle(n):
     # (u, v) in [0,1]^2 -> (u (1 - v), v); Jacobian (1 - v) goes into the v weight.
-    (tu, wu), (tv, wv) = _line(n), _line(n, 1)
+    (tu, wu), (tv, wv) = gauss_line(n), gauss_line(n, 1)
     return [((u * (1 - v), v), a * b) for u, a in zip(tu, wu) for v, b in zip(tv, wv)]
 
 
 def _collapsed_tetra(n):
     # (u, v, w) -> (u (1-v)(1-w), v (1-w), w); Jacobian (1-v)(1-w)^2.
-    (tu, wu), (tv, wv), (tw, ww) = _line(n), _line(n, 1), _line(n, 2)
+    (tu, wu), (tv, wv), (tw, ww) = gauss_line(n), gauss_line(n, 1), gauss_line(n, 2)
     return [((u * (1 - v) * (1 - w), v * (1 - w), w), a * b * c)
             for u, a in zip(tu, wu) for v, b in zip(tv, wv) for w, c in zip(tw, ww)]
 
@@ -165,7 +165,7 @@ def _simplex_gauss(domain, n):
 
 def _collapsed(domain, m):
     if domain == "line":  # [0, 1]: plain Gauss-Legendre
-        pw = [((t,), w) for t, w in zip(*_line(m))]
+        pw = [((t,), w) for t, w in zip(*gauss_line(m))]
     else:
         pw = _collapsed_triangle(m) if domain == "triangle" else _collapsed_tetra(m)
     return 2 * m - 1, pw
@@ -235,7 +235,7 @@ def rule(element_name: str, name: str) -> QuadratureRule:
     elif kind == PYRAMID and dim == 3:
         # x = a (1 - z), y = b (1 - z): the Jacobian (1 - z)^2 is the Jacobi
         # weight, and the rational shape functions become polynomials in (a, b, z).
-        tz, wz = _line(n, 2)
+        tz, wz = gauss_line(n, 2)
         pw = [((a * (1 - z), b * (1 - z), z), wa * wb * wzz)
               for z, wzz in zip(tz, wz) for b, wb in line for a, wa in line]
         degree = 2 * n - 1

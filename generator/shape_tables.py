@@ -16,6 +16,7 @@ face integrand N_a (t1 x t2) of flat or curved faces); see `rule_for`.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import sympy as sp
 
@@ -23,7 +24,7 @@ from .. import elements as _types
 from ..elements import BOX, SIMPLEX
 from ..elements._faces import FACE_ONLY
 from .elements import reference
-from .quadrature import QuadratureRule, _line, rule, rule_for_degree
+from .quadrature import QuadratureRule, gauss_line, rule, rule_for_degree
 
 FILE = "shape_tables.json"
 FORMAT = 1
@@ -56,7 +57,7 @@ def rule_for(t):
     if t.domain == SIMPLEX:
         degree = 2 * t.order + t.dim * (t.order - 1)
         if t.name in FACE_ONLY:        # not registered: the Gauss rule on [0, 1] directly
-            x, w = _line(degree // 2 + 1)
+            x, w = gauss_line(degree // 2 + 1)
             return QuadratureRule(f"gauss{degree}", t.name, tuple((p,) for p in x), w, 2 * len(x) - 1)
         return rule_for_degree(t.name, degree)
     n = t.order + 1 if (t.domain == BOX and t.dim <= 2) else t.order + 2
@@ -98,10 +99,8 @@ def render() -> str:
     return json.dumps(build(), sort_keys=True, separators=(",", ":"), indent=None) + "\n"
 
 
-def write(out) -> "Path":
+def write(out) -> Path:
     """Write <out>/shape_tables.json atomically; returns its path."""
-    from pathlib import Path
-
     from .pipeline import write_atomic
     path = Path(out) / FILE
     write_atomic(path, render())

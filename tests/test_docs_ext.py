@@ -23,6 +23,7 @@ def _forget_user_laws():
 
 
 def _extension():
+    pytest.importorskip("docutils", reason="the docs extras are not installed (pip install '.[docs]')")
     path = ROOT / "docs" / "_ext" / "tensormass_docs.py"
     spec = importlib.util.spec_from_file_location("tensormass_docs_under_test", path)
     module = importlib.util.module_from_spec(spec)

@@ -646,14 +646,14 @@ def cmd_accuracy(args) -> int:
     for key in ("elements", "laws", "quadratures", "levels"):
         if getattr(args, key, None) is not None:
             kwargs[key] = getattr(args, key)
-    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    workers, scheduler = workers_of(args), getattr(args, "scheduler", None)
     if workers > 1 or scheduler is not None:      # only then: the defaults are run_accuracy's own
         kwargs.update(workers=workers, scheduler=scheduler)
     run_accuracy(args.out, scene_path=args.scene, quick=args.quick, **kwargs)
     return 0
 
 
-def _workers(args) -> int:
+def workers_of(args) -> int:
     workers = getattr(args, "workers", None) or 1
     if workers < 1:
         raise TensormassError(f"--workers must be at least 1, got {workers}")

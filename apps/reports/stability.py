@@ -37,7 +37,7 @@ from .stability_runs import (COLUMNS, BAR, DIVERGED, GRAVITY, INVALID, RECOVERED
                              md, min_det_F, num, outcome_in, refused, scene_dict, short, stable_dt)
 from ...runtime.mesh.bars import generate_bar
 from ..batch import map_tasks
-from .accuracy import _workers, add_workers_options
+from .accuracy import workers_of, add_workers_options
 
 __all__ = ["run_stability", "add_stability_command", "COLUMNS"]
 
@@ -375,7 +375,7 @@ def run_stability(out_dir, quick=False, progress=print, workers: int = 1, schedu
 
 
 def _cmd_stability(args) -> int:
-    workers, scheduler = _workers(args), getattr(args, "scheduler", None)
+    workers, scheduler = workers_of(args), getattr(args, "scheduler", None)
     extra = {"workers": workers, "scheduler": scheduler} if workers > 1 or scheduler is not None else {}
     rows = run_stability(args.out, quick=args.quick, **extra)
     return 0 if rows and all(r["ok"] for r in rows) else 1

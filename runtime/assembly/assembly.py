@@ -27,14 +27,15 @@ from ..kernels.fused import block_positions
 from .pattern import SparsePattern  # noqa: F401  (re-exported)
 from ..base.errors import ElementError, InvertedElementError, TensormassError
 
-__all__ = ["Assembler", "assemble", "project_psd", "SparsePattern"]
+__all__ = ["Assembler", "assemble", "project_psd", "scatter_matrix", "scatter_vector", "SparsePattern"]
 
 
 # --------------------------------------------------------------------------- numba loops
 
 
 @njit(cache=True)
-def _scatter_matrix(data, Ke, pos, scale):
+def scatter_matrix(data, Ke, pos, scale):
+    """data[pos[e]] += scale Ke[e], element after element (the serial reference of the scatters)."""
     for e in range(Ke.shape[0]):
         for r in range(Ke.shape[1]):
             for s in range(Ke.shape[2]):
@@ -42,7 +43,8 @@ def _scatter_matrix(data, Ke, pos, scale):
 
 
 @njit(cache=True)
-def _scatter_vector(out, fe, dofs):
+def scatter_vector(out, fe, dofs):
+    """out[dofs[e]] += fe[e], element after element."""
     for e in range(fe.shape[0]):
         for r in range(fe.shape[1]):
             out[dofs[e, r]] += fe[e, r]

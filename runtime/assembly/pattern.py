@@ -13,7 +13,7 @@ array (no sort of all node-pair keys), and the node-blocked map of every element
 the same pass.  The full per-entry map (7.2 M ints for 50 400 tetra) is only built for callers
 that ask for it (consistent mass, volumetric couplings, dof-based tests).
 Measured with apps/bench_pattern.py (best of 5, 2 shared cores, old = the sort-based build,
-runtime.assembly.pattern._ReferencePattern, in the same run):
+runtime.assembly.pattern.ReferencePattern, in the same run):
     50 400 tetra (29 520 dofs, 1.22 M nonzeros): SparsePattern 100 -> 11.5 ms, rebuild 10.4 ms,
         Assembler(model) 151 -> 16.7 ms, Context(model) 155 -> 25 ms
     6 720 tetra10 (2.47 M nonzeros): SparsePattern 94 -> 12 ms, Assembler 126 -> 13 ms
@@ -578,7 +578,7 @@ def _reference_submatrix_map(pattern, rows_keep, cols_keep):
     return entries, c[entries].astype(pattern.indices.dtype), indptr.astype(pattern.indptr.dtype), shape
 
 
-class _ReferencePattern(SparsePattern):
+class ReferencePattern(SparsePattern):
     """The pattern as it was built before runtime.assembly.pattern (node pairs sorted, every per-entry map
     built at once, the Assembler deriving the node-blocked maps from them, numpy submatrix maps):
     the tests and apps/bench_pattern.py compare with it."""

@@ -44,7 +44,10 @@ import scipy.sparse as sp
 from numba import njit
 
 from ... import laws
+from ...generated import volumetric as committed_splits
 from ..base.errors import InvertedElementError, TensormassError
+from ..kernels import kernels as _kernels
+from .assembly import project_psd, scatter_matrix, scatter_vector
 
 __all__ = ["VolumetricCoupling", "volumetric_functions"]
 
@@ -56,17 +59,15 @@ def volumetric_functions(law_name: str):
     From the committed generated/volumetric.py while the law file is unchanged; a new or edited
     law is split now (sympy) and the same expressions are compiled in memory."""
     law = laws.get(law_name)
-    try:
-        from ...generated import volumetric as table
-    except ImportError:
-        table = None
-    if table is not None and law_name in table.SPLITS and table.SPLITS[law_name][2] == laws.source_hash(law):
+    table = committed_splits
+    if law_name in table.SPLITS and table.SPLITS[law_name][2] == laws.source_hash(law):
         parameter, measure, _ = table.SPLITS[law_name]
         return parameter, measure, table.FUNCTIONS[law_name]
     return _derived(law_name)
 
 
 def _derived(law_name: str):
+    # deferred: the generator loads sympy (0.65 s), needed only for a law without a committed split
     from ...generator import volumetric as gen
     text = gen.module_text([law_name])
     namespace: dict = {}
@@ -80,7 +81,6 @@ class VolumetricCoupling:
 
     def __init__(self, model, part_index: int, rows: np.ndarray, formulation: str, params: dict,
                  materials: np.ndarray):
-        from ..kernels import kernels as _kernels
         part = model.parts[part_index]
         self.part_index, self.formulation, self.law = part_index, formulation, part.law
         self.parameter, self.measure, self.function = volumetric_functions(part.law)
@@ -155,7 +155,6 @@ class VolumetricCoupling:
     def evaluate(self, U: np.ndarray, f: np.ndarray | None, data: np.ndarray | None, project: bool = False) -> float:
         """Add this coupling's forces into f and Jacobian into the CSR data (either may be None);
         returns its energy sum_g V_g U(J_g)."""
-        from .assembly import _scatter_matrix, _scatter_vector, project_psd
         ue = np.ascontiguousarray(U[self.cells])
         theta = self.kernel.energy(self.D, ue)
         fe = Ke = None
@@ -172,7 +171,7 @@ class VolumetricCoupling:
             Ug, dU, d2U = (np.broadcast_to(np.asarray(x, dtype=float), J.shape) for x in self.function(J, **self.params))
         p = self.ST @ dU
         if f is not None:
-            _scatter_vector(f, np.ascontiguousarray(p[:, None] * fe), self.dofs)
+            scatter_vector(f, np.ascontiguousarray(p[:, None] * fe), self.dofs)
         if data is not None:
             c = d2U / self.V
             cell_c = c if self.formulation == "mean_dilatation" else np.zeros(len(p))
@@ -182,7 +181,7 @@ class VolumetricCoupling:
                 Ke *= p[:, None, None]
                 Ke += cell_c[:, None, None] * fe[:, :, None] * fe[:, None, :]
                 project_psd(Ke, out=Ke)
-                _scatter_matrix(data, Ke, self.positions, 1.0)
+                scatter_matrix(data, Ke, self.positions, 1.0)
             else:
                 _scatter_cells(data, Ke, fe, p, cell_c, self.positions)
             if self.formulation != "mean_dilatation":
@@ -216,7 +215,6 @@ class _EdgeSmoothing:
     to the part's cell-wise integration (module docstring)."""
 
     def __init__(self, model, part, rows, materials, params, bulk):
-        from ..kernels import kernels as _kernels
         self.part = part
         cells = part.cells[rows]
         n = len(cells)
@@ -274,7 +272,6 @@ class _EdgeSmoothing:
 
     def evaluate(self, U, f, data, project, cell_positions, edge_positions) -> float:
         """Add sum_k A_k W_dev(F_k) - sum_e w_e A_e W_dev(F_e) to f and data; return it."""
-        from .assembly import _scatter_matrix, _scatter_vector, project_psd
         part = self.part
         uc = np.ascontiguousarray(U[self.cells])
         ue = np.ascontiguousarray(U[self.nodes])
@@ -287,13 +284,13 @@ class _EdgeSmoothing:
                 project_psd(Kk, out=Kk)
                 project_psd(Kc, out=Kc)
             Kc *= -self.weight[:, None, None]
-            _scatter_matrix(data, Kk, edge_positions, 1.0)
-            _scatter_matrix(data, Kc, cell_positions, 1.0)
+            scatter_matrix(data, Kk, edge_positions, 1.0)
+            scatter_matrix(data, Kc, cell_positions, 1.0)
         elif f is not None:
             fk, fc = self.kernel.forces(self.D, ue), part.kernel.forces(self.D_cells, uc)
         if f is not None:
-            _scatter_vector(f, fk, self.dofs)
-            _scatter_vector(f, np.ascontiguousarray(-self.weight[:, None] * fc), self.cell_dofs)
+            scatter_vector(f, fk, self.dofs)
+            scatter_vector(f, np.ascontiguousarray(-self.weight[:, None] * fc), self.cell_dofs)
         return energy
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...generator.elements import element as reference
-from ...generator.ir import _midside_edges
+from ...generator.ir import midside_triples
 
 
 def random_elements(element: str, n: int, seed: int = 0, straight: bool = False, distortion: float = 0.08) -> np.ndarray:
@@ -27,6 +27,6 @@ def random_elements(element: str, n: int, seed: int = 0, straight: bool = False,
     X = np.einsum("ik,nak->nia", ref, A) + rng.standard_normal((n, 1, dim))
     X += scale * rng.standard_normal(X.shape)
     if straight:
-        for m, a, b in _midside_edges(ref_el):
+        for m, a, b in midside_triples(ref_el):
             X[:, m] = (X[:, a] + X[:, b]) / 2
     return np.ascontiguousarray(X)

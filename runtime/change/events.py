@@ -22,7 +22,7 @@ from .adapt import mean_deformation_gradients
 from ..assembly.pattern import SparsePattern
 from ..base import integrator_kinds
 from ..mesh.regions import box_tolerance, region_cell_masks
-from ..mesh.topology import (TopologyError, _cell_nodes, _face_rows, _shared_faces, box_cells, check_topology,
+from ..mesh.topology import (TopologyError, nodes_of_cells, face_rows, shared_faces, box_cells, check_topology,
     incidence, plane_pairs, refine_hexahedra, removal, separate)
 
 __all__ = ["TopologyEvents", "tearing_pairs", "blade_fractions", "pieces"]
@@ -126,7 +126,7 @@ class TopologyEvents:
         hull = (np.minimum(lo, moved[0]), np.maximum(hi, moved[1]))
         pairs = self._plane_pairs(mesh, i, hull)
         centres = np.array([mesh.points[np.intersect1d(a, b)].mean(axis=0) for a, b in
-                            zip(_cell_nodes(mesh, pairs[:, 0]), _cell_nodes(mesh, pairs[:, 1]))])
+                            zip(nodes_of_cells(mesh, pairs[:, 0]), nodes_of_cells(mesh, pairs[:, 1]))])
         s = blade_fractions(centres, e.box, e.sweep)
         pairs, s = pairs[np.isfinite(s)], s[np.isfinite(s)]
         first, last = _step_at(e.time, solver), _step_at(e.time + e.duration, solver)
@@ -304,8 +304,8 @@ def _still_joined(mesh, pairs) -> np.ndarray:
     """The pairs that still share a face (an earlier cut may have opened some of them already)."""
     if not len(pairs):
         return pairs
-    keys, owner = _face_rows(mesh, np.unique(pairs))
-    shared = _shared_faces(keys, owner)
+    keys, owner = face_rows(mesh, np.unique(pairs))
+    shared = shared_faces(keys, owner)
     if not len(shared):
         return pairs[:0]
     code = shared[:, 0] * mesh.n_cells + shared[:, 1]
@@ -344,9 +344,9 @@ def tearing_pairs(model, u, threshold: float, box=None, tol: float = 0.0) -> np.
     if not hot.size:
         return np.zeros((0, 2), np.int64)
     inc = incidence(mesh)
-    nodes = np.unique(np.concatenate(_cell_nodes(mesh, hot)))
+    nodes = np.unique(np.concatenate(nodes_of_cells(mesh, hot)))
     _, around, _ = inc.of(nodes)
-    keys, owner = _face_rows(mesh, np.unique(around))
+    keys, owner = face_rows(mesh, np.unique(around))
     order = np.lexsort(keys.T[::-1])
     k, o = keys[order], owner[order]
     same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
@@ -394,4 +394,4 @@ def _refuse_floating(model, label, step) -> None:
 
 
 def _cells_of(mesh, ids):
-    return _cell_nodes(mesh, ids)
+    return nodes_of_cells(mesh, ids)

@@ -121,7 +121,7 @@ def _locate(mesh: Mesh, cell_ids: np.ndarray) -> tuple:
     return block, cell_ids - off[block]
 
 
-def _cell_nodes(mesh: Mesh, cell_ids: np.ndarray) -> list:
+def nodes_of_cells(mesh: Mesh, cell_ids: np.ndarray) -> list:
     block, row = _locate(mesh, cell_ids)
     return [mesh.blocks[b].cells[r] for b, r in zip(block, row)]
 
@@ -179,7 +179,7 @@ def box_cells(mesh: Mesh, box, tol: float = 0.0) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0, np.int64)
 
 
-def _face_rows(mesh: Mesh, cell_ids: np.ndarray):
+def face_rows(mesh: Mesh, cell_ids: np.ndarray):
     """Every face of the given cells: (sorted corner keys padded with -1 (m, 4), owner cell)."""
     block, row = _locate(mesh, cell_ids)
     keys, owner = [], []
@@ -196,7 +196,7 @@ def _face_rows(mesh: Mesh, cell_ids: np.ndarray):
     return np.vstack(keys), np.concatenate(owner)
 
 
-def _shared_faces(keys: np.ndarray, owner: np.ndarray) -> np.ndarray:
+def shared_faces(keys: np.ndarray, owner: np.ndarray) -> np.ndarray:
     """(m, 2) owner pairs of the face keys that occur twice (each pair sorted, pairs sorted)."""
     order = np.lexsort(keys.T[::-1])
     k, o = keys[order], owner[order]
@@ -228,14 +228,14 @@ def plane_pairs(mesh: Mesh, point, normal, box=None, tol: float = 0.0) -> np.nda
         ids.append(off + rows)
         side.append((_centroids(mesh, blk)[rows] - p) @ n > 0)
     ids, side = np.concatenate(ids), np.concatenate(side)
-    keys, owner = _face_rows(mesh, ids)
-    pairs = _shared_faces(keys, owner)
+    keys, owner = face_rows(mesh, ids)
+    pairs = shared_faces(keys, owner)
     where = np.zeros(mesh.n_cells, dtype=np.int8)
     where[ids] = np.where(side, 1, -1)
     pairs = pairs[where[pairs[:, 0]] != where[pairs[:, 1]]]
     if box is not None and len(pairs):
         centre = np.array([mesh.points[np.intersect1d(a, b)].mean(axis=0)
-                           for a, b in zip(_cell_nodes(mesh, pairs[:, 0]), _cell_nodes(mesh, pairs[:, 1]))])
+                           for a, b in zip(nodes_of_cells(mesh, pairs[:, 0]), nodes_of_cells(mesh, pairs[:, 1]))])
         inside = np.all((centre >= lo) & (centre <= hi), axis=1)
         pairs = pairs[inside]
     return pairs
@@ -329,7 +329,7 @@ def _faces_at(el) -> np.ndarray:
 
 def _pair_faces(mesh: Mesh, pairs: np.ndarray) -> np.ndarray:
     """Sorted corner keys (m, 4) of the faces the cell pairs share; refused where they share none."""
-    keys, owner = _face_rows(mesh, np.unique(pairs))
+    keys, owner = face_rows(mesh, np.unique(pairs))
     order = np.lexsort(keys.T[::-1])
     k, o = keys[order], owner[order]
     same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
@@ -609,7 +609,7 @@ def removal(mesh: Mesh, cell_ids, inc: Incidence | None = None) -> Removal:
     keep[ids] = False
     new_ids = np.where(keep, np.cumsum(keep) - 1, -1)
     inc = incidence(mesh) if inc is None else inc
-    nodes = np.unique(np.concatenate(_cell_nodes(mesh, ids)))
+    nodes = np.unique(np.concatenate(nodes_of_cells(mesh, ids)))
     node, cell, _ = inc.of(nodes)
     alive = np.zeros(mesh.n_points, dtype=bool)
     alive[node[keep[cell]]] = True

@@ -41,6 +41,9 @@ from ..scene.types import Loads, Output, Solver
 from ..scene.formulation_check import check_element as _check_formulation_element, formulation_name
 from ..assembly.volumetric import VolumetricCoupling, volumetric_functions
 from ..scene.mesh_source import build_mesh, scene_mesh
+from ..kernels.corotational import CorotationalShell
+from ..physics.hanging import HangingNodes
+from ..physics.volume_constraint import VolumeConstraint
 
 # outputs_for (runtime.physics.integrators), build_mesh and scene_mesh (runtime.scene.mesh_source) are kept
 # importable from here.
@@ -163,7 +166,6 @@ def _shell_kernel(kernel, law: str, flags: list):
                               "give every shell material the same value")
     if flag.flat[0] == 0:
         return kernel
-    from ..kernels.corotational import CorotationalShell
     return CorotationalShell(kernel)
 
 
@@ -428,7 +430,6 @@ class Model:
         """The hanging-node constraints of a refined mesh (runtime.physics.hanging), or None."""
         if getattr(self.mesh, "midpoints", None) is None:
             return None
-        from ..physics.hanging import HangingNodes
         hanging = HangingNodes.of(self.mesh, self.dofs_per_node, self.fixed_dofs)
         if hanging is not None and not integrator_kinds.get(self.solver.kind).hanging_nodes:
             raise TensormassError(f"solver.kind = {self.solver.kind!r}: a mesh with hanging nodes (hexahedra "
@@ -529,7 +530,6 @@ class Model:
         if not self.shells:
             raise TensormassError("solver.preserve_volume: needs a closed shell surface (element = \"shell\"); "
                                   "a solid keeps its volume through its law (nu -> 0.5, a formulation)")
-        from ..physics.volume_constraint import VolumeConstraint
         cells = np.vstack([b.cells for b in self.mesh.blocks if b.type == "shell"])
         try:
             constraint = VolumeConstraint(cells, self.mesh.points)

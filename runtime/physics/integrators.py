@@ -201,7 +201,7 @@ class Explicit(_Dynamic):
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
         if self.beta:
-            f -= self.beta * _stiffness_times(ctx.asm, u, v, f_int, self.model.size)
+            f -= self.beta * stiffness_times(ctx.asm, u, v, f_int, self.model.size)
         v1 = v.copy()
         v1[free] += h * self.inv_mass[free] * f[free]
         v1[fixed] = self.boundary_velocity(u, t, h)
@@ -243,7 +243,7 @@ class Explicit(_Dynamic):
         return f"{why}; reduce dt or use implicit_euler / backward_euler"
 
 
-def _stiffness_times(asm, u, x, f_int, size):
+def stiffness_times(asm, u, x, f_int, size):
     """K x by a forward difference of the forces (explicit runs load no stiffness kernel)."""
     norm = np.abs(x).max()
     if norm == 0:

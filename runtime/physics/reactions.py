@@ -53,7 +53,7 @@ import numpy as np
 from ..base import integrator_kinds
 from ..base.errors import TensormassError
 from ..mesh.regions import box_contains, selection_nodes
-from .integrators import _stiffness_times as _integrator_stiffness_times
+from .integrators import stiffness_times as _integrator_stiffness_times
 
 __all__ = ["Reactions", "residual", "reaction_field", "entry_name"]
 
@@ -187,11 +187,11 @@ def _evaluate(ctx, integrator) -> np.ndarray:
             r = r + alpha * (model.mass_matrix @ v)
         if beta:
             r = r + beta * (ctx.asm.matrix(ctx.asm.stiffness(u)) @ v if "stiffness" in integrator.outputs
-                            else _stiffness_times(ctx, u, v))
+                            else stiffness_times(ctx, u, v))
     return r
 
 
-def _stiffness_times(ctx, u, v):
+def stiffness_times(ctx, u, v):
     return _integrator_stiffness_times(ctx.asm, u, v, ctx.asm.forces(u), ctx.model.size)
 
 

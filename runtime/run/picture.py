@@ -50,6 +50,9 @@ from ..base.errors import TensormassError
 from ..scene.parser import DEFAULT_VIEW, VIEWS, view_angles
 from .output import OutputError, check_png_path
 from ..base.files import write_bytes_atomic
+from ..physics.fields import FIELDS
+from ..base import integrator_kinds
+from ..mesh.faces import face_table
 
 __all__ = ["write_picture", "picture_of_simulation", "render_picture", "check_picture", "pick_field", "auto_scale",
            "round_length", "pyvista_usable", "EDGE_LIMIT", "DEFAULT_VIEW", "VIEWS"]
@@ -117,7 +120,6 @@ def picture_of_simulation(sim, path, field: str = "von_mises", scale="auto", tit
         values = fields([field])
         if unit is None:
             try:
-                from ..physics.fields import FIELDS
                 unit = FIELDS[field].unit if field in FIELDS else ""
             except ImportError:
                 unit = ""
@@ -134,7 +136,6 @@ def _scene_options(model) -> dict:
 
 
 def _static(model) -> bool:
-    from ..base import integrator_kinds
     kind = getattr(getattr(model, "solver", None), "kind", None)
     return kind in integrator_kinds.KINDS and not integrator_kinds.get(kind).dynamic
 
@@ -387,7 +388,6 @@ def _polygons(mesh, kept=None):
     offsets = np.concatenate([[0], np.cumsum([len(b) for b in mesh.blocks])]).astype(np.int64)
     polys, cells, two_sided = [], [], []
     if mesh.dim == 3:
-        from ..mesh.faces import face_table
         ft = face_table(mesh)
         if len(ft.cell):
             mine = np.ones(len(ft.cell), bool) if kept is None else kept[ft.cell]

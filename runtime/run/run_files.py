@@ -43,6 +43,9 @@ from ..base.errors import EXIT_OK, TensormassError
 from .curves import plot_history
 from .history import write_history_csv
 from .output import SUMMARY_FORMAT, Writer, check_summary_path, is_summary_file, write_summary
+from ..physics.fields import check_available, has_stress
+from ..scene.parser import PICTURE_DEFAULT
+from . import picture as pictures
 
 __all__ = ["RunFiles", "SUMMARY_NAME", "summary_mapping"]
 
@@ -106,8 +109,6 @@ class RunFiles:
         <dir>/displacement.png, and the summary's output says why (picture_note)."""
         if not self.picture:
             return
-        from ..physics.fields import check_available, has_stress
-        from ..scene.parser import PICTURE_DEFAULT
         if self.picture == PICTURE_DEFAULT:
             bare = next((p for p in sim.model.parts if not has_stress(p.kernel)), None)
             if bare is not None:
@@ -122,9 +123,8 @@ class RunFiles:
                 check_available(sim.model, [field], sim._field_providers())
         except TensormassError as exc:
             raise TensormassError(f"{refused}{exc} (a picture of the displacement: --picture displacement)") from None
-        from .picture import check_picture
         try:
-            check_picture(sim.model)             # the scene's view and clip included
+            pictures.check_picture(sim.model)             # the scene's view and clip included
         except TensormassError as exc:       # the mesh, view or clip: no other field would help
             raise TensormassError(f"{refused}{exc}") from None
 
@@ -248,10 +248,9 @@ class RunFiles:
             out["picture_skipped"] = ("the run stopped: its last state is not a result to picture" if stopped
                                       else "no simulation state to draw")
             return out
-        from .picture import picture_of_simulation
         path = self.picture_path
         try:
-            picture_of_simulation(sim, path, self.picture, step=sim.step, time=sim.time)
+            pictures.picture_of_simulation(sim, path, self.picture, step=sim.step, time=sim.time)
         except (TensormassError, OSError) as exc:
             out["picture_error"] = _optional_failed(data, "picture", path, exc)
             return out

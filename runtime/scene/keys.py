@@ -286,7 +286,7 @@ MATERIAL_LAW_PARAMETERS = "the law's native parameters and options (see the cata
 
 def mesh_elements() -> tuple:
     """What mesh.element accepts: the generated bars' element types (mixed included) and shell."""
-    from .parser import ELEMENTS_2D, ELEMENTS_3D
+    from .parser import ELEMENTS_2D, ELEMENTS_3D      # deferred: the parser imports this module
     return tuple(dict.fromkeys(ELEMENTS_3D + ELEMENTS_2D + ("shell",)))
 
 
@@ -294,7 +294,7 @@ def builtin_laws() -> tuple:
     """What law names (material.law, adapt.law / from) list: the built-in laws.  A user law (law_file,
     $TENSORMASS_LAWS) is accepted too, but belongs to its user: the generated reference stays the
     same whatever law files the process that builds it has loaded."""
-    from ... import laws
+    from ... import laws        # deferred: 0.17 s; this module is the schema, cheap to import (docs)
     return tuple(laws.names(user=False))
 
 

@@ -29,6 +29,9 @@ from ..mesh.refine import REFINABLE_TYPES
 from .formulation_check import check_element as check_formulation_element
 from ..mesh.regions import (assign_materials, box_contains, box_tolerance, check_unused_materials,
     prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
+from ..mesh import surfaces
+from ..mesh.solids import ball_tetrahedra
+from ... import laws as _laws
 
 __all__ = ["load_mesh", "scene_mesh", "build_mesh", "check_against_mesh", "catalogue_check", "PROBE_TOLERANCE"]
 
@@ -90,7 +93,6 @@ SURFACES = ("plate", "sphere")         # shell generators (runtime.mesh.surfaces
 def shell_mesh(spec):
     """The shell triangles of a MeshSpec with element = "shell": a generated plate (at z = 0) or
     icosphere, or a file's triangles (3D points; other cells refused, unused points dropped)."""
-    from ..mesh import surfaces
     if spec.generate == "plate":
         points, triangles = surfaces.plate(spec.size[0], spec.size[1], spec.cells[0], spec.cells[1])
     elif spec.generate == "sphere":
@@ -105,7 +107,6 @@ def shell_mesh(spec):
 
 def ball_mesh(spec):
     """The tetrahedral solid ball of a MeshSpec with generate = "ball" (runtime.mesh.solids), at its origin."""
-    from ..mesh.solids import ball_tetrahedra
     points, tetra = ball_tetrahedra(spec.radius, spec.divisions)
     points = points + np.asarray(spec.origin, float)[:3]
     check_coordinates(points)
@@ -139,7 +140,6 @@ def build_mesh(spec):
 
 def catalogue_check(key, element, law, quadrature):
     """A SceneError unless (element, law, quadrature) is in the generator's catalogue."""
-    from ... import laws as _laws
     if law in _laws.discrete_names() and element not in _laws.get(law).elements:
         raise SceneError(f"{key}: law {law!r} is a discrete model defined on {', '.join(_laws.get(law).elements)} "
                          f"cells, not {element}")

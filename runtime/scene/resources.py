@@ -66,8 +66,11 @@ import numpy as np
 from ... import elements as _elements
 from ..solve import pardiso as _pardiso
 from ..base import integrator_kinds
+from ..assembly.assembly import BLOCK_BYTES
 from ..base.errors import TensormassError
+from ..base.parallel import available as available_threads
 from ..kernels import catalogue
+from ..solve.band import band_costs
 from ..mesh.solids import LAYERS as BALL_LAYERS
 from .types import Material, Solver
 from ..solve.choices import (AUTO_BAND_WORK_PER_NNZ, AUTO_DIRECT_BELOW, BAND_MAX_ENTRIES, DIRECT_LIMIT,
@@ -575,14 +578,13 @@ class _Estimator:
 
     def _band_seconds(self) -> float:
         """The solver's own modelled band seconds (runtime.solve.band.band_costs: what it chooses by)."""
-        from ..solve.band import band_costs
         factor, iteration = band_costs(self.dofs, self.kd, self.nnz)
         return factor + 3.0 * iteration
 
     def _pardiso_seconds(self) -> float:
         """The solver's own modelled PARDISO seconds, a factor and three solves (runtime.solve.solvers.
         pardiso_costs) for the factor flops and entries of PARDISO_FLOPS_PER_N2 and PARDISO_FILL."""
-        from ..solve.solvers import pardiso_costs
+        from ..solve.solvers import pardiso_costs      # deferred: pyamg, 0.05 s of a scene's ~1 s parse
         n = float(self.dofs)
         factor, solve = pardiso_costs(PARDISO_FLOPS_PER_N2 * n * n, PARDISO_FILL * n ** (4.0 / 3.0))
         return factor + 3.0 * solve
@@ -639,7 +641,6 @@ class _Estimator:
             return kernel + forces
         n = float(self.dofs)
         if self.linear == "band":
-            from ..solve.band import band_costs
             factor, iteration = band_costs(self.dofs, self.kd, self.nnz)
             reuse = BAND_REUSE_STEPS if self.integrator.dynamic else 1
             solve = factor / reuse + 3.0 * iteration
@@ -689,10 +690,8 @@ def _suggest(n: int) -> str:
 
 
 def _assembly_block_bytes() -> int:
-    from ..assembly.assembly import BLOCK_BYTES      # deferred: assembly imports numba loops
     return int(BLOCK_BYTES)
 
 
 def _threads() -> int:
-    from ..base.parallel import available
-    return available()
+    return available_threads()

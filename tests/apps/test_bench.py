@@ -13,7 +13,8 @@ from helpers import random_elements, relative_error
 from tensormass.apps import bench
 from tensormass.apps.classic import load_classic
 
-CASES = [(element, law, quadrature)
+# the classic implementation is numba code compiled per case (5 to 20 s cold): hexahedra in CI's heavy step
+CASES = [pytest.param(element, law, quadrature, marks=pytest.mark.heavy if element == "hexahedron" else ())
          for element, quadrature in (("tetra", "gauss1"), ("hexahedron", "gauss2"))
          for law in ("hooke", "stvk", "neohookean")]
 
@@ -22,7 +23,7 @@ CASES = [(element, law, quadrature)
 def test_classic_matches_generated(element, law, quadrature):
     X = random_elements(element, 40, seed=3)
     u = 0.05 * np.random.default_rng(4).standard_normal(X.shape)
-    kernel = tm.load_kernel(element, law, quadrature, backend="numba")
+    kernel = tm.load_kernel(element, law, quadrature)
     classic = load_classic(element, law, quadrature)
     D = kernel.constants(X, E=2.0e5, nu=0.35)
     state = classic.constants(X, E=2.0e5, nu=0.35)
@@ -67,6 +68,7 @@ def test_classic_rejects_unknown_law():
         load_classic("tetra", "mooney_rivlin", "gauss1")
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_kernel_bench_writes_json(tmp_path):
     path = tmp_path / "out" / "bench.json"
     report = bench.run_kernel_bench(quick=True, entries=["tetra_stvk_gauss1"], json_path=path, progress=False)
@@ -108,6 +110,7 @@ def test_unknown_entry_is_an_error():
     assert [e.name for e in bench.resolve_entries(["tetra_mooney_rivlin_gauss1"])] == ["tetra_mooney_rivlin_gauss1"]
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_steps_bench_writes_json(tmp_path, monkeypatch):
     from tensormass.apps import bench_steps
     monkeypatch.setitem(__import__("sys").modules, "felupe", None)     # comparison skipped

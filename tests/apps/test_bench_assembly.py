@@ -2,9 +2,12 @@
 that the fused path equals buffers + scatter bit for bit, writes JSON with every rate."""
 import json
 
+import pytest
+
 from tensormass.apps.cli import main
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_assembly_bench_writes_json(tmp_path, capsys):
     out = tmp_path / "assembly.json"
     assert main(["bench", "assembly", "--quick", "--json", str(out)]) == 0

@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tensormass.apps.bench_cutting import CUT_STEP, STEPS, run_cutting_bench
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_bench_times_the_cut_against_a_full_rebuild(tmp_path):
     lines = []
     path = tmp_path / "cutting.json"

@@ -1,9 +1,12 @@
 """`tensormass bench formulations`: the report's structure and what it compares (no timing assertions)."""
 import json
 
+import pytest
+
 from tensormass.apps import bench_formulations as bf
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_hexahedral_case_reports_both_formulations(tmp_path):
     case = [c for c in bf.QUICK_CASES if c[0].body == "cantilever"]
     out = tmp_path / "f.json"

@@ -1,9 +1,12 @@
 """`tensormass bench integrators --quick`: runs through the CLI, writes JSON, and its numbers tell the schemes apart."""
 import json
 
+import pytest
+
 from tensormass.apps.cli import main
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_integrator_bench_writes_json(tmp_path, capsys):
     out = tmp_path / "integrators.json"
     assert main(["bench", "integrators", "--quick", "--json", str(out)]) == 0

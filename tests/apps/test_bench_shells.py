@@ -3,10 +3,13 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tensormass.apps.bench_shells import run_shells_bench, scene_text
 from tensormass.runtime.scene.scene import Scene
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_bench_writes_rows_ratios_and_colours(tmp_path):
     lines = []
     path = tmp_path / "shells.json"

@@ -3,10 +3,13 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tensormass.apps.bench_springs import MODELS, run_springs_bench, scene_text
 from tensormass.runtime.scene.scene import Scene
 
 
+@pytest.mark.heavy          # the benchmark's quick run, 10 to 35 s cold: CI's heavy step
 def test_quick_bench_writes_ratios_against_the_baselines(tmp_path):
     lines = []
     path = tmp_path / "springs.json"

@@ -39,6 +39,7 @@ def test_analytic_references_are_the_thesis_numbers():
     assert analytic("bending", 100.0) == pytest.approx(1.5 * 100 * 10 * 2.4 ** 4 / (1e7 * 0.4 ** 2))
 
 
+@pytest.mark.heavy          # the report's quick run takes 60 s cold: CI's heavy step
 def test_quick_report_rows_and_files(report):
     rows, header, table, md = report
     assert header == COLUMNS + MODEL_COLUMNS and len(table) == len(rows) == 9
@@ -48,6 +49,7 @@ def test_quick_report_rows_and_files(report):
     assert "Table 7.3" in md and "Table 7.5" in md and "(3396)" in md and "(5.61)" in md
 
 
+@pytest.mark.heavy          # the report's quick run takes 60 s cold: CI's heavy step
 def test_quick_numbers_are_sane(report):
     rows = report[0]
     # HybMSS shear force within 10 % of Timoshenko's 3571 N at 5 %

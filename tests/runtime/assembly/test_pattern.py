@@ -9,7 +9,7 @@ from tensormass.runtime.base.dofs import node_dofs
 from tensormass.runtime.kernels.fused import block_positions
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.model.model import Model
-from tensormass.runtime.assembly.pattern import (_ReferencePattern, _reference_by_nodes,
+from tensormass.runtime.assembly.pattern import (ReferencePattern, _reference_by_nodes,
     _reference_submatrix_map)
 from tensormass.runtime.scene.types import Adapt, Fixed, Material, Solver
 
@@ -184,6 +184,6 @@ def test_assembly_is_bit_identical_to_the_old_pattern(monkeypatch):
                   [Material(law="stvk", quadrature="gauss2", E=1e6, nu=0.3)])
     u = 1e-3 * np.random.default_rng(2).standard_normal(model.n_dofs)
     new = Assembler(model).forces_and_stiffness(u)
-    monkeypatch.setattr(assembly, "SparsePattern", _ReferencePattern)
+    monkeypatch.setattr(assembly, "SparsePattern", ReferencePattern)
     old = Assembler(model).forces_and_stiffness(u)
     assert new[0].tobytes() == old[0].tobytes() and new[1].tobytes() == old[1].tobytes()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tensormass as tm
-from tensormass.runtime.assembly.assembly import SparsePattern, _scatter_matrix, _scatter_vector
+from tensormass.runtime.assembly.assembly import SparsePattern, scatter_matrix, scatter_vector
 from tensormass.runtime.base.dofs import node_dofs
 from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.kernels.fused import block_positions, node_block_positions
@@ -53,8 +53,8 @@ def _setup(element, law, cells, size, backend):
 def _element_path(parts, pattern, U, dim, f, data):
     for (k, D, cells), pos in zip(parts, pattern.positions):
         fe, Ke = k.forces_and_stiffness(D, U[cells])
-        _scatter_vector(f, fe, node_dofs(cells, dim))
-        _scatter_matrix(data, Ke, pos, 1.0)
+        scatter_vector(f, fe, node_dofs(cells, dim))
+        scatter_matrix(data, Ke, pos, 1.0)
 
 
 @pytest.mark.parametrize("element,law,cells,size,backend", BACKEND_CASES)
