@@ -139,13 +139,13 @@ def _node_pattern(flat, estart, bstart, n_nodes, dpn, blocks):
     return node_indptr, cols[:at].copy()
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _dof_pattern(node_indptr, node_cols, dpn, indptr, indices, diagonal):
     """The dof-level CSR of node-major dofs: row (m, i) holds columns c dpn + j for every node c of
-    node row m; diagonal[(m, i)] = its entry (m dpn + i, m dpn + i).  Node rows write disjoint
-    slots: the threads' split does not change a bit."""
+    node row m; diagonal[(m, i)] = its entry (m dpn + i, m dpn + i).  Serial: it writes each entry once
+    (memory-bound), and parallel=True cost 3 to 4 s more of numba compilation on a first run."""
     n_nodes = node_indptr.size - 1
-    for m in prange(n_nodes):
+    for m in range(n_nodes):
         lo = node_indptr[m]
         deg = node_indptr[m + 1] - lo
         rel = 0
@@ -164,16 +164,16 @@ def _dof_pattern(node_indptr, node_cols, dpn, indptr, indices, diagonal):
     indptr[n_nodes * dpn] = dpn * dpn * node_indptr[n_nodes]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _submatrix(indptr, indices, rows_keep, cols_keep, n_dofs, out_indptr):
     """Entries of the block (rows_keep, cols_keep) in CSR order: count per row, prefix sums, fill;
-    rows in parallel, each writing its own slots (the same bits for any thread count)."""
+    serial for the reason _dof_pattern is."""
     cmap = np.full(n_dofs, -1, dtype=np.int64)
     for j in range(cols_keep.size):
         cmap[cols_keep[j]] = j
     n = rows_keep.size
     counts = np.zeros(n, dtype=np.int64)
-    for i in prange(n):
+    for i in range(n):
         row = rows_keep[i]
         c = 0
         for p in range(indptr[row], indptr[row + 1]):
@@ -186,7 +186,7 @@ def _submatrix(indptr, indices, rows_keep, cols_keep, n_dofs, out_indptr):
     count = out_indptr[n]
     entries = np.empty(count, dtype=np.int64)
     out_indices = np.empty(count, dtype=indices.dtype)
-    for i in prange(n):
+    for i in range(n):
         row = rows_keep[i]
         at = out_indptr[i]
         for p in range(indptr[row], indptr[row + 1]):

@@ -14,6 +14,7 @@ def quick(tmp_path_factory):
     return out, {r["model"]: r for r in run_squeeze(out, quick=True, progress=None)}
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_quick_report_writes_its_csv_and_json(quick):
     out, rows = quick
     with open(out / "squeeze.csv", newline="") as fh:

@@ -43,7 +43,7 @@ def test_c_equals_numba(entry):
     assert relative_error(c.stiffness(D, u), Kn) < 1e-12
 
 
-@pytest.mark.parametrize("law", ["neohookean", "mooney_rivlin"])
+@pytest.mark.parametrize("law", ["neohookean", pytest.param("mooney_rivlin", marks=pytest.mark.heavy)])
 def test_inverted_element_inside_a_vector_block(law):
     """An inverted element in a block of 4 sends the block to the scalar path: same flags, same values."""
     numba = tm.load_kernel("hexahedron", law, "gauss2", backend="numba")

@@ -63,6 +63,7 @@ def builtin(tmp_path_factory):
     return out, rows, lines
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_builtin_results_csv(builtin):
     out, rows, lines = builtin
     header, table = _read(out / "results.csv")
@@ -177,6 +178,7 @@ def others(tmp_path_factory):
     return out, rows
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_benchmarks_rows_and_column(others):
     out, rows = others
     header, table = _read(out / "results.csv")
@@ -286,6 +288,7 @@ def test_cube_reactions_sign_and_linearity():
 
 
 # -- user-scene sweep over listed settings ---------------------------------------------------------------
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_user_scene_settings_sweep(tmp_path):
     scene = tmp_path / "tiny.toml"
     scene.write_text(SCENE)

@@ -1,10 +1,13 @@
 """The 3D nearly incompressible block (apps/reports/block.py): tetrahedra lock, nodal pressure does not."""
 from __future__ import annotations
 
+import pytest
+
 from tensormass.apps.reports.accuracy import BENCHMARK_NAMES
 from tensormass.apps.reports.block import block
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_tetrahedra_lock_and_nodal_pressure_does_not():
     assert "block" in BENCHMARK_NAMES
     res = block(True, lambda *_: None, {"levels": {"tetra": [4], "tetra10": [2]}, "reference": 4})

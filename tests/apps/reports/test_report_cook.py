@@ -28,6 +28,7 @@ def test_meshes_cover_the_panel_counter_clockwise(element):
     assert np.allclose(np.sort(p[:, 0])[[0, -1]], [0.0, 48.0]) and np.isclose(p[:, 1].max(), 60.0)
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_linear_elements_lock_and_the_locking_free_formulations_do_not():
     assert "cook" in BENCHMARK_NAMES
     res = cook(True, lambda *_: None, {"levels": [4], "reference": 8, "nus": [1.0 / 3.0, 0.4999]})

@@ -1,5 +1,7 @@
 """The cylinder (prism and hexahedral layers against Lame) and the Newton-iteration rows near
 incompressibility are benchmarks of `report accuracy`."""
+import pytest
+
 from tensormass.apps.reports.accuracy import BENCHMARK_NAMES, _benchmark_task
 
 
@@ -7,6 +9,7 @@ def test_cylinder_and_incompressible_are_accuracy_benchmarks():
     assert {"cylinder", "incompressible"} <= set(BENCHMARK_NAMES)
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_the_quick_cylinder_shows_prism_locking_and_its_cure():
     result, _ = _benchmark_task("cylinder", True, None)
     rows = {(r["element"], r["formulation"], r["case"], r["cells"]): r for r in result["rows"]}

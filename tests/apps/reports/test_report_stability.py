@@ -30,6 +30,7 @@ def _find(rows, case, law):
     return hits
 
 
+@pytest.mark.heavy          # the report's quick run, 10 to 45 s cold: CI's heavy step
 def test_csv_columns_and_rows(quick):
     out, rows = quick
     table = _csv(out)

@@ -63,7 +63,7 @@ def results(asm, u, threads):
 
 
 @two_cores
-@pytest.mark.parametrize("backend", ["numba", "c"])
+@pytest.mark.parametrize("backend", [pytest.param("numba", marks=pytest.mark.heavy), "c"])   # numba: 10 s cold
 def test_one_and_two_threads_give_the_same_bytes(small_blocks, monkeypatch, backend):
     model = model_of(backend=backend)
     asm = Assembler(model, parallel=True)
@@ -248,7 +248,7 @@ def test_full_position_scatter_when_no_node_block_map(small_blocks, monkeypatch)
     assert full.stiffness(u, True).tobytes() == blocked.stiffness(u, True).tobytes()
 
 
-@pytest.mark.parametrize("backend", ["numba", "c"])
+@pytest.mark.parametrize("backend", [pytest.param("numba", marks=pytest.mark.heavy), "c"])   # numba: 10 s cold
 @pytest.mark.parametrize("element,quadrature", [("tetra", "gauss1"), ("hexahedron", "gauss2"), ("tetra10", "gauss2")])
 def test_the_assembler_takes_the_fused_path_and_it_equals_the_buffered_one(monkeypatch, small_blocks, backend,
                                                                           element, quadrature):
