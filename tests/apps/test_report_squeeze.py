@@ -28,6 +28,7 @@ def test_quick_report_writes_its_csv_and_json(quick):
                for r in data["rows"])
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_the_constraint_keeps_the_volume_and_the_others_lose_some(quick):
     _, rows = quick
     assert abs(rows["shell_constraint"]["volume_loss_percent"]) < 1e-6          # |1 - V/V0| < 1e-8
@@ -43,6 +44,7 @@ def test_the_constraint_keeps_the_volume_and_the_others_lose_some(quick):
         assert math.isfinite(row["volume_end"]) and row["steps"] > 0
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_ordering_measured_on_the_quick_meshes(quick):
     """The full run's order holds on the quick meshes: neo-Hookean loses least, linear FEM more
     (the linear strain misses the quadratic terms of the volume change), MSS and the unconstrained

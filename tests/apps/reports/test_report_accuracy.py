@@ -79,6 +79,7 @@ def test_builtin_results_csv(builtin):
     assert any("reference" in line for line in lines)
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_builtin_errors_decrease_for_hexahedron(builtin):
     _, rows, _ = builtin
     hexa = [r for r in rows if r["element"] == "hexahedron"]
@@ -88,6 +89,7 @@ def test_builtin_errors_decrease_for_hexahedron(builtin):
     assert hexa[1]["dofs"] > hexa[0]["dofs"]
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_builtin_plots_and_report(builtin):
     out, rows, _ = builtin
     report = _check_outputs(out)
@@ -192,6 +194,7 @@ def test_benchmarks_rows_and_column(others):
     assert "thesis' FEM" in report and "Hooke's error" in report
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_volume_change(others):
     _, rows = others
     vol = {r["case"]: r["value"] for r in rows if r["benchmark"] == "volume"}
@@ -223,6 +226,7 @@ def test_deformed_volume_of_a_sheared_hexahedron():
     assert deformed_volume(mesh, u) == pytest.approx(1.8)
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_beam2d_quadratic_beats_linear(others):
     _, rows = others
     beam = {(r["element"], r["cells"]): r for r in rows if r["benchmark"] == "beam2d"}
@@ -231,6 +235,7 @@ def test_beam2d_quadratic_beats_linear(others):
     assert t6["error_reference"] < t3["error_reference"]
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_mixed_and_large_deflection(others):
     _, rows = others
     mixed = {r["element"]: r for r in rows if r["benchmark"] == "mixed"}

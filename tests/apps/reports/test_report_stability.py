@@ -43,6 +43,7 @@ def test_csv_columns_and_rows(quick):
         assert r["outcome"] in outcomes or re.fullmatch(r"refused \(.+\)", r["outcome"]), r["outcome"]
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_no_nan_anywhere(quick):
     out, _ = quick
     for name in ("stability.csv", "report.md"):
@@ -56,6 +57,7 @@ def test_no_nan_anywhere(quick):
     assert not list(out.glob("*.tmp")), "temporary files left behind"
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_every_case_ok(quick):
     out, rows = quick
     bad = [(r["case"], r["law"], r["outcome"], r["message"]) for r in rows if not r["ok"]]
@@ -63,6 +65,7 @@ def test_every_case_ok(quick):
     assert all(r["ok"] == "True" for r in _csv(out))
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_expected_outcomes(quick):
     out, _ = quick
     table = _csv(out)
@@ -91,6 +94,7 @@ def test_expected_outcomes(quick):
         assert not (r["min_det_F"] and float(r["min_det_F"]) <= 0 and r["outcome"] in ("stable", "recovered")), r
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_report_md(quick):
     out, rows = quick
     text = (out / "report.md").read_text(encoding="utf-8")
@@ -157,6 +161,7 @@ def test_report_parser_route(tmp_path, monkeypatch):
     assert args.run(args) == 0
 
 
+@pytest.mark.heavy          # the report's quick run (its module fixture), 15 to 50 s cold: CI's heavy step
 def test_spring_lattices_buckle_without_face_diagonals(quick):
     """Thesis Fig. 7.3 / 7.6: squeezed 20 %, MSS-Baudet and HybMSS-FD lose their symmetry, HybMSS holds."""
     _, rows = quick
