@@ -102,6 +102,7 @@ def test_pareto_front():
     assert pareto_front(rows) == [3, 0, 2]
 
 
+@pytest.mark.heavy          # a convergence sweep of a user scene, 15 s cold: CI's heavy step
 def test_user_scene(tmp_path):
     scene = tmp_path / "tiny.toml"
     scene.write_text(SCENE)

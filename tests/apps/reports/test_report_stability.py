@@ -144,6 +144,7 @@ def test_cli_route(tmp_path, monkeypatch):
         _parser().parse_args(["stability", "--quick"])          # --out is required
 
 
+@pytest.mark.heavy          # the report's quick run through the CLI, 45 s cold: CI's heavy step
 def test_cli_quick_end_to_end(tmp_path):
     args = _parser().parse_args(["stability", "--quick", "--out", str(tmp_path / "out")])
     assert args.run(args) == 0
