@@ -27,12 +27,8 @@ EXAMPLE = ROOT / "examples" / "yeoh"
 
 
 @pytest.fixture(autouse=True)
-def _forget_user_laws():
-    """A test's user laws leave with it: other tests list every law of the process."""
-    before = dict(laws._user)
-    yield
-    laws._user.clear()
-    laws._user.update(before)
+def _forget_user_laws(forget_user_laws):
+    """Every test here: its user laws leave with it (conftest.forget_user_laws)."""
 
 
 def _backend() -> str:
