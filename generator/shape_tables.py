@@ -25,6 +25,7 @@ from ..elements import BOX, SIMPLEX
 from ..elements._faces import FACE_ONLY
 from .elements import reference
 from .quadrature import QuadratureRule, gauss_line, rule, rule_for_degree
+from ..runtime.base.files import write_atomic
 
 FILE = "shape_tables.json"
 FORMAT = 1
@@ -101,7 +102,6 @@ def render() -> str:
 
 def write(out) -> Path:
     """Write <out>/shape_tables.json atomically; returns its path."""
-    from .pipeline import write_atomic
     path = Path(out) / FILE
     write_atomic(path, render())
     return path

@@ -25,6 +25,7 @@ from sympy.printing.numpy import NumPyPrinter
 
 from .. import laws as laws_pkg
 from ..laws.measures import MEASURES
+from ..runtime.base.files import write_atomic
 
 FILE = "volumetric.py"
 THETA = sp.Symbol("theta", positive=True)
@@ -120,6 +121,5 @@ def module_text(law_names=None) -> str:
 
 
 def write(out) -> None:
-    from .pipeline import write_atomic
     from pathlib import Path
     write_atomic(Path(out) / FILE, module_text())

@@ -29,6 +29,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from .base import DiscreteLaw, Law, LawError, lame_from_E_nu
+from .measures import MEASURES
 
 __all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names", "shell_names",
            "is_discrete", "is_shell", "is_quadratic", "measure_names", "kernel_law", "load_file", "user_law",
@@ -227,7 +228,6 @@ def is_discrete(name: str) -> bool:
 def measure_names() -> list[str]:
     """The volume measures (laws/measures.py): parameter-free "laws" the generator builds kernels
     for, which the locking-free formulations use; not materials."""
-    from .measures import MEASURES
     return sorted(MEASURES)
 
 
@@ -245,7 +245,6 @@ def get(name: str) -> Law:
 
 def kernel_law(name: str) -> Law:
     """What a kernel integrates: a law, or a volume measure (generator and kernel loader)."""
-    from .measures import MEASURES
     if name in MEASURES:
         return MEASURES[name][0]
     return get(name)
