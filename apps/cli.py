@@ -73,9 +73,10 @@ def _names(values, known, kind):
 def cmd_list(args) -> int:
     from .. import laws                    # deferred: 0.01 s, only for the list of law names
     from ..generator.elements import ELEMENTS      # deferred: sympy, 0.52 s
-    manifest = json.loads((committed_dir() / "manifest.json").read_text())["entries"]
+    from ..runtime.kernels import catalogue          # deferred: numpy, only for this command
+    manifest = {r["name"]: r for r in catalogue.committed().values()}
     rows = [("entry", "points", "constants", "ops energy", "ops forces", "ops f+K", "backends")]
-    for key, r in manifest.items():
+    for key, r in sorted(manifest.items()):
         rows.append((key, r["points"], r["constants"], r["ops"]["energy"], r["ops"]["forces"],
                      r["ops"]["forces_and_stiffness"], ",".join(sorted(r["files"]))))
     widths = [max(len(str(row[i])) for row in rows) for i in range(len(rows[0]))]

@@ -59,17 +59,10 @@ def quadratures(element: str, law: str) -> list[str]:
 def check(element: str | None, law: str, quadrature: str) -> None:
     """ValueError naming the choices unless a kernel exists for (element, law, quadrature); with
     element None: for some element type."""
-    if element is not None and not _in_manifest(element, law):
+    if not _in_manifest(element, law):
         from ...generator.catalogue import entries       # deferred: see quadratures()
-        entries([element], [law], [quadrature])
+        entries(None if element is None else [element], [law], [quadrature])
         return
-    if element is None and not _in_manifest(None, law):
-        from ...generator.catalogue import entries       # deferred: see quadratures()
-        entries(None, [law], [quadrature])
-        return
-    if element is not None:
-        known = quadratures(element, law)
-    else:
-        known = sorted({q for _, n, q in committed() if n == law})
+    known = {q for e, n, q in committed() if n == law and element in (None, e)}
     if quadrature not in known:
         raise ValueError(f"unknown quadrature {quadrature}; available: {', '.join(sorted(known))}")

@@ -157,6 +157,17 @@ def _size(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 1.0
 
 
+def _material_kernels(mesh, materials, adapt, index) -> set:
+    """(element, law, quadrature) of every kernel the materials need on this mesh: each law that adapt
+    rules can switch a group to, and the volume measure of a material under a locking-free formulation."""
+    triples = set()
+    for (element, law, quad), members in material_groups(mesh, materials, index).items():
+        triples.update((element, reach, quad) for reach in reachable_laws(law, adapt))
+        if any(getattr(materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
+            triples.add((element, volumetric_functions(law)[1], quad))
+    return triples
+
+
 def _shell_kernel(kernel, law: str, flags: list):
     """The co-rotational wrapper around a linear shell kernel (runtime.kernels.corotational) where the
     materials ask for it (option corotational = 1, the default); corotational = 0: the kernel itself."""
@@ -268,13 +279,7 @@ class Model:
         mesh = scene_mesh(scene) if mesh is None else mesh
         index = assign_materials(mesh, scene.materials)
         outputs = outputs_for(scene.solver.kind)
-        keys = set()
-        for (element, law, quad), members in material_groups(mesh, scene.materials, index).items():
-            for reach in reachable_laws(law, getattr(scene, "adapt", ())):
-                keys.add((element, reach, quad, outputs))
-            if any(getattr(scene.materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
-                keys.add((element, volumetric_functions(law)[1], quad, outputs))     # its volume measure
-        return keys
+        return {(*triple, outputs) for triple in _material_kernels(mesh, scene.materials, getattr(scene, "adapt", ()), index)}
 
     # -- parts ---------------------------------------------------------------------------------
     def _build_parts(self) -> list:
@@ -320,13 +325,8 @@ class Model:
     def _prepare_kernels(self, index) -> None:
         """Get the generated kernels the parts will load ready at once (C: the missing libraries
         compiled in parallel, one compiler per core), the formulations' measure kernels included."""
-        triples = set()
-        for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
-            for name in reachable_laws(law, self.adapt):
-                if _custom.registered_kernel(element, name, quad) is None:
-                    triples.add((element, name, quad))
-            if any(getattr(self.materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
-                triples.add((element, volumetric_functions(law)[1], quad))
+        triples = [t for t in _material_kernels(self.mesh, self.materials, self.adapt, index)
+                   if _custom.registered_kernel(*t) is None]
         _kernels.prepare_kernels(triples, self.solver.backend)
 
     def _formulated(self, element, law, members, reach):

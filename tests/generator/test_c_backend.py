@@ -268,3 +268,20 @@ def test_cflags_override(monkeypatch):
     assert "-ffast-math" not in cc.CFLAGS
     monkeypatch.setenv("TENSORMASS_CFLAGS", "-O1 -std=c99")
     assert cc.cflags() == ["-O1", "-std=c99", "-fPIC", "-shared"]
+
+
+def test_a_scenes_kernels_are_built_together_and_then_loaded_without_compiling(tmp_path, monkeypatch):
+    """prepare_kernels compiles every missing library (one compiler per core); loading finds them built."""
+    from tensormass.runtime.base.cache import cache_dir
+    from tensormass.runtime.kernels.kernels import prepare_kernels
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
+    monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
+    triples = [("tetra", "hooke", "gauss1"), ("triangle", "stvk", "gauss1")]
+    before = len(cc.COMPILATIONS)
+    prepare_kernels(triples + triples[:1], "c")
+    assert sorted(r["name"] for r in cc.COMPILATIONS[before:]) == ["tetra_hooke_gauss1", "triangle_stvk_gauss1"]
+    prepare_kernels(triples, "c")                  # nothing left to build
+    assert len(cc.COMPILATIONS) == before + 2
+    for triple in triples:
+        module = cc.load_source(kernel_source(*triple, "c"), cache_dir())
+        assert not module.COMPILED

@@ -273,3 +273,45 @@ def test_band_factor_reuse():
     fresh.solve(A, b)
     fresh.solve(near, b)
     assert not fresh.last.endswith("-reuse")
+
+
+def test_the_warm_up_loads_only_the_chosen_methods_loops(monkeypatch):
+    """Setup compiles the numba loops of the method the pattern gets, not every path's."""
+    calls = []
+    monkeypatch.setattr(solvers, "warm_up", lambda index=None, pointer=None, paths=solvers.NUMBA_PATHS: calls.append(tuple(paths)))
+    A = grid_laplacian(3, 3, 3, shift=0.1)
+    LinearSolver("band").warm_up(A)
+    LinearSolver("cg").warm_up(A)
+    LinearSolver("cg", preconditioner="jacobi").warm_up(A)
+    LinearSolver("lu").warm_up(A)                   # SciPy's SuperLU: no numba loop
+    LinearSolver("band").warm_up(None)              # P^T A P formed per solve: every path
+    assert calls == [(("band", "ic"),), (("cg", "ic"),), (("cg", "jacobi"),), solvers.NUMBA_PATHS]
+
+
+def test_an_explicit_run_warms_up_no_linear_solver(monkeypatch):
+    from tensormass.runtime.physics.newton import Context
+    warmed = []
+    monkeypatch.setattr(Context, "warm_up_solver", lambda self: warmed.append(self.model.solver.kind))
+    for kind in ("explicit", "static"):
+        scene = tm.Scene.from_string(f"""
+[mesh]
+generate = "bar"
+size = [0.4, 0.1, 0.1]
+cells = [4, 1, 1]
+element = "tetra"
+[[material]]
+law = "hooke"
+E = 1.0e6
+nu = 0.3
+density = 1000.0
+[[fixed]]
+box = [[-1, -1, -1], [1e-9, 1, 1]]
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[solver]
+kind = "{kind}"
+steps = 2
+dt = 1e-5
+""")
+        tm.Simulation(scene).run()
+    assert warmed == ["static"]
