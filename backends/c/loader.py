@@ -9,11 +9,14 @@ generated on demand) and the cache folder. Libraries live in
 flags, the compiler and the CPU (``-march=native``); each has a sidecar
 ``<so>.sha256`` that is checked before loading, so a truncated or corrupted
 library is rebuilt instead of crashing the process. Builds go to a temporary
-file in the same folder and are renamed into place: processes compiling the
-same kernel at once never see a half-written library.
+file in the same folder and are renamed into place, under a file lock per
+library (``<cache>/c/.<so>.lock``): of the processes that need a kernel at once
+(pytest-xdist or dask workers, two runs), one compiles it and the others wait
+for it and load its library.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -223,14 +226,42 @@ def _kill_group(proc) -> None:
     proc.wait()
 
 
-def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str], writable=None) -> dict:
-    """Compile source into lib (atomically, with its sidecar hash); returns the compile record.
+@contextlib.contextmanager
+def _build_lock(lib: Path):
+    """An exclusive lock on <folder>/.<library>.lock while one process builds the library.
+    Without fcntl (not POSIX) there is no lock: the writes are atomic anyway, so processes that
+    race only compile twice."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    with open(lib.parent / f".{lib.name}.lock", "a+b") as handle:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
+def build(name: str, source: Path, lib: Path, command: list[str], flags: list[str], writable=None,
+          rebuild: bool = False) -> dict | None:
+    """Compile source into lib (atomically, with its sidecar hash); returns the compile record,
+    or None when another process built a valid lib while this one waited for the build lock
+    (rebuild=True compiles anyway: a library that verifies but does not load).
     writable(folder, needed_for), when given, checks the folder first (the runtime's clear
     error for a read-only cache); else the folder is created."""
     if writable is not None:
         writable(lib.parent, f"compiling C kernel {name}")
     else:
         lib.parent.mkdir(parents=True, exist_ok=True)
+    with _build_lock(lib):
+        if not rebuild and _verified(lib):
+            return None
+        return _compile(name, source, lib, command, flags)
+
+
+def _compile(name: str, source: Path, lib: Path, command: list[str], flags: list[str]) -> dict:
     fd, tmp = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}.", suffix=".so.tmp")
     os.close(fd)
     try:
@@ -379,11 +410,13 @@ def build_missing(sources, cache: Path, writable=None) -> list[dict]:
             seen.add(lib)
             todo.append((name, source, lib))
     if len(todo) <= 1:
-        return [build(name, source, lib, command, flags, writable) for name, source, lib in todo]
-    # threads suffice: each waits on its compiler process, which runs on a core of its own
-    with ThreadPoolExecutor(max_workers=min(len(todo), os.cpu_count() or 1)) as pool:
-        jobs = [pool.submit(build, name, source, lib, command, flags, writable) for name, source, lib in todo]
-        return [job.result() for job in jobs]
+        records = [build(name, source, lib, command, flags, writable) for name, source, lib in todo]
+    else:
+        # threads suffice: each waits on its compiler process, which runs on a core of its own
+        with ThreadPoolExecutor(max_workers=min(len(todo), os.cpu_count() or 1)) as pool:
+            jobs = [pool.submit(build, name, source, lib, command, flags, writable) for name, source, lib in todo]
+            records = [job.result() for job in jobs]
+    return [record for record in records if record is not None]
 
 
 def load_source(source: Path, cache: Path, expected_name: str | None = None, writable=None) -> CModule:
@@ -410,7 +443,7 @@ def load_source(source: Path, cache: Path, expected_name: str | None = None, wri
             if compiled is not None:
                 raise
             # The hash matched but the library does not load (or lacks a symbol): build it again.
-            compiled = build(name, source, lib, command, flags, writable)
+            compiled = build(name, source, lib, command, flags, writable, rebuild=True)
             module = _open(meta, lib, source, compiled)
         _loaded[str(lib)] = module
         return module
