@@ -235,18 +235,6 @@ def test_study_cost_sums_the_estimates():
 
 # -- dask.distributed ------------------------------------------------------------------------------
 
-def test_two_workers_give_the_sequential_table(scene, tmp_path):
-    pytest.importorskip("distributed")
-    vary = ["material.0.E=1e7,1e8", "mesh.cells=[2,1,1],[4,1,1]", "material.0.law=hooke,stvk"]   # 8 tasks
-    seq, par = tmp_path / "seq.csv", tmp_path / "par.csv"
-    rows, code = batch.run_batch([scene], vary, workers=1, out=seq, progress=False)
-    assert code == 0 and len(rows) == 8
-    _, code = batch.run_batch([scene], vary, workers=2, out=par, progress=False)
-    assert code == 0
-    assert _table(seq) == _table(par)
-    assert len({r["probe.tip.2"] for r in _table(par)}) == 8
-
-
 def test_workers_run_one_thread_each_and_leave_ctrl_c_to_this_process(capfd):
     distributed = pytest.importorskip("distributed")
     before = {k: os.environ.get(k) for k in batch.THREAD_ENV}
@@ -263,15 +251,35 @@ def test_workers_run_one_thread_each_and_leave_ctrl_c_to_this_process(capfd):
     assert "Traceback" not in capfd.readouterr().err                        # a quiet shutdown
 
 
-def test_report_accuracy_same_csv_on_one_and_two_workers(tmp_path):
-    pytest.importorskip("distributed")
+@pytest.fixture(scope="module")
+def two_workers():
+    """The scheduler address of a 2-worker cluster started by batch's own LocalCluster code (_client), shared
+    by the studies below: starting the worker processes is most of their cost, once here instead of per study."""
+    distributed = pytest.importorskip("distributed")
+    with batch._client(distributed, 2, None, None) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        yield client.scheduler.address
+
+
+def test_two_workers_give_the_sequential_table(scene, tmp_path, two_workers):
+    vary = ["material.0.E=1e7,1e8", "mesh.cells=[2,1,1],[4,1,1]", "material.0.law=hooke,stvk"]   # 8 tasks
+    seq, par = tmp_path / "seq.csv", tmp_path / "par.csv"
+    rows, code = batch.run_batch([scene], vary, workers=1, out=seq, progress=False)
+    assert code == 0 and len(rows) == 8
+    _, code = batch.run_batch([scene], vary, scheduler=two_workers, out=par, progress=False)
+    assert code == 0
+    assert _table(seq) == _table(par)
+    assert len({r["probe.tip.2"] for r in _table(par)}) == 8
+
+
+def test_report_accuracy_same_csv_on_one_and_two_workers(tmp_path, two_workers):
     from tensormass.apps.reports.accuracy import run_accuracy
     tiny = {"elements": ["hexahedron", "tetra"], "laws": ["hooke"], "quadratures": {"tetra": ["gauss1"]},
             "levels": [[2, 1, 1], [4, 1, 1]], "levels_quadratic": [[2, 1, 1]], "reference": [4, 1, 1]}
     timing = ("time_setup", "time_assembly", "time_solve", "time_total", "peak_memory_mb")
-    for workers in (1, 2):
-        run_accuracy(tmp_path / str(workers), quick=True, _sweep=tiny, benchmarks=["cantilever"],
-                     progress=None, workers=workers)
+    run_accuracy(tmp_path / "1", quick=True, _sweep=tiny, benchmarks=["cantilever"], progress=None, workers=1)
+    run_accuracy(tmp_path / "2", quick=True, _sweep=tiny, benchmarks=["cantilever"], progress=None,
+                 scheduler=two_workers)
     one, two = _table(tmp_path / "1" / "results.csv", timing), _table(tmp_path / "2" / "results.csv", timing)
     assert len(one) == 4 and one == two
 
