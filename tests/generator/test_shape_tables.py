@@ -3,13 +3,26 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tensormass.apps.cli import committed_dir, main
 from tensormass.generator import shape_tables
 
 SMALL = ["--element", "triangle", "--law", "hooke", "--quadrature", "gauss1", "--backend", "numba"]
 
 
-def test_generate_writes_the_tables(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def rendered():
+    """The tables' text, built once (3 s of sympy integration) for the commands below."""
+    return shape_tables.render()
+
+
+@pytest.fixture
+def render_once(rendered, monkeypatch):
+    monkeypatch.setattr(shape_tables, "render", lambda: rendered)
+
+
+def test_generate_writes_the_tables(tmp_path, capsys, render_once):
     assert main(["generate", *SMALL, "--no-compile", "--out", str(tmp_path)]) == 0
     written = (tmp_path / shape_tables.FILE).read_bytes()
     assert written == (committed_dir() / shape_tables.FILE).read_bytes()
@@ -17,7 +30,7 @@ def test_generate_writes_the_tables(tmp_path, capsys):
     assert {"line", "line3", "triangle", "triangle6", "quad"} <= set(types)      # every face type
 
 
-def test_check_reports_stale_tables(monkeypatch, capsys):
+def test_check_reports_stale_tables(monkeypatch, capsys, render_once):
     entry = SMALL[:6]                          # every backend: the manifest records both
     assert main(["generate", "--check", *entry]) == 0
     capsys.readouterr()
