@@ -29,14 +29,23 @@ def _rule(dim):
     return np.column_stack([u.ravel(), (v * (1 - u)).ravel(), (t * (1 - u) * (1 - v)).ravel()]), W.ravel()
 
 
+def _det(J):
+    """det of a stack of 2 x 2 or 3 x 3 matrices by cofactors (np.linalg.det's batched LU is 10x slower here)."""
+    if J.shape[-1] == 2:
+        return J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    return (J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
+            - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
+            + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0]))
+
+
 def volumes(mesh):
     """Exact measure of every cell (its isoparametric map's det J integrated)."""
     out = []
     for blk in mesh.blocks:
         xi, w = _rule(mesh.dim)
         _, G = shape_functions(blk.type, xi)
-        J = np.einsum("ckd,qkr->cqdr", mesh.points[blk.cells], G)
-        out.append(np.linalg.det(J) @ w)
+        J = np.tensordot(mesh.points[blk.cells], G, axes=([1], [1])).transpose(0, 2, 1, 3)   # c q d r, by BLAS
+        out.append(_det(J) @ w)
     return np.concatenate(out)
 
 
