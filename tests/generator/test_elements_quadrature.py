@@ -48,6 +48,16 @@ def exact_monomial(name, e):
 def integrate_exact(name, expr):
     """sympy integration over the reference domain (slow; used sparingly)."""
     x, y, z = XI
+    if name == "pyramid":
+        # collapsed coordinates x = (1 - z) s, y = (1 - z) t, dx dy = (1 - z)^2 ds dt: the rational pyramid
+        # functions become polynomials over [-1, 1]^2 x [0, 1], integrated term by term in closed form
+        s, t = sp.symbols("s t")
+        num, den = sp.fraction(sp.cancel(expr.subs({x: (1 - z) * s, y: (1 - z) * t}, simultaneous=True)
+                                         * (1 - z) ** 2))
+        if not den.free_symbols:
+            terms = sp.Poly(num, s, t, z).terms()
+            return sum((c * line(a) * line(b) * sp.Rational(1, k + 1) for (a, b, k), c in terms),
+                       sp.Integer(0)) / den
     limits = {
         "triangle": [(y, 0, 1 - x), (x, 0, 1)],
         "quad": [(x, -1, 1), (y, -1, 1)],
