@@ -9,12 +9,39 @@ from tensormass.generator.elements import element as reference
 from tensormass.runtime.base.samples import random_elements
 
 __all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error", "FULL_CATALOGUE",
-           "catalogue_selection"]
+           "catalogue_selection", "QUICK_KERNELS", "QUICK_NUMBA_KERNELS", "quick"]
 
 # The checks that run over the catalogue (finite differences, patch tests, C = numba, ...) take a
 # sample covering every element type, law and quadrature; CI's catalogue step sets
 # TENSORMASS_FULL_CATALOGUE=1 and runs them on every entry (pytest -m catalogue).
 FULL_CATALOGUE = os.environ.get("TENSORMASS_FULL_CATALOGUE") == "1"
+
+
+# The kernels the quick suite compiles. A cold run pays gcc -O3 (1.5 to 8 s) once per distinct C
+# kernel and a numba compile once per generated numba module, so a test that needs "some kernel of
+# this element / law / quadrature" picks its kernel from this one pool and each kernel is compiled
+# once for the whole suite. The scene default (gauss2) for the three common laws on every element;
+# the gauss1 tetrahedra (the cheapest 3D kernels); mooney_rivlin and stable_neohookean only where
+# they are cheap (mooney_rivlin on 3D elements takes 4 to 8 s per build); one gauss3 and the exact
+# rules on one 2D quadratic element (with their Hooke tangents); the formulations' measure kernels
+# at the scene default (and gauss1 on tetrahedra). Other instances: pytest.mark.catalogue or heavy.
+_ELEMENTS = ("tetra", "tetra10", "hexahedron", "wedge", "pyramid", "triangle", "triangle6", "quad")
+QUICK_KERNELS = frozenset(
+    [f"{e}_{law}_gauss2" for e in _ELEMENTS for law in ("hooke", "stvk", "neohookean")]
+    + [f"tetra_{law}_gauss1" for law in ("hooke", "stvk", "neohookean", "stable_neohookean")]
+    + ["triangle_mooney_rivlin_gauss1", "triangle_hooke_gauss1",      # triangle_hooke_gauss1: the tangent
+       "quad_hooke_gauss3", "triangle6_stvk_exact", "triangle6_hooke_exact"]   # at rest of the one before
+    + [f"{e}_measure_{m}_gauss2" for e in _ELEMENTS for m in ("volume", "dilatation", "green_dilatation")]
+    + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")])
+# Generated numba modules (5 to 30 s of numba compile each, cold): only tests about numba itself
+# (C = numba, the numba backend's own behaviour) load them, and from these.
+QUICK_NUMBA_KERNELS = frozenset(["tetra_hooke_gauss1", "tetra_stvk_gauss1", "triangle_mooney_rivlin_gauss1",
+                                 "hexahedron_neohookean_gauss2"])
+
+
+def quick(name: str, backend: str = "c") -> bool:
+    """Whether the quick suite may load the kernel `name` with `backend` (the pools above)."""
+    return name in (QUICK_NUMBA_KERNELS if backend == "numba" else QUICK_KERNELS)
 
 
 def catalogue_selection(entries, sample) -> list:

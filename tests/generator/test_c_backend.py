@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,10 +18,11 @@ from tensormass.generator.ir import build_ir
 from tensormass.runtime.base.errors import DegenerateElementError, InvertedElementError, TensormassError
 from tensormass.runtime.kernels.kernels import kernel_source, load_kernel
 
-from helpers import random_elements
+from helpers import quick, random_elements
 
-# kernels test_backends_agree.py compiles with numba too (numba's cache is shared); every entry: its
-# catalogue step in CI
+# C = numba in the quick suite is test_backends_agree.py's (on helpers.QUICK_NUMBA_KERNELS); here the
+# same metadata on those kernels (no extra compile), and the same results on a wider sample in CI's
+# catalogue step (heavy: a numba compile of 5 to 30 s per kernel).
 SAMPLE = [
     ("tetra", "stvk", "gauss1"),
     ("hexahedron", "neohookean", "gauss2"),
@@ -27,6 +30,7 @@ SAMPLE = [
     ("tetra10", "hooke", "gauss1"),
     ("triangle", "mooney_rivlin", "gauss1"),
     ("quad", "neohookean", "gauss3"),
+    ("tetra", "hooke", "gauss1"),
 ]
 RTOL = 1e-12
 N = 40
@@ -40,7 +44,8 @@ def close(a, b, what):
     assert err <= RTOL, f"{what}: relative difference {err:.3e}"
 
 
-@pytest.fixture(scope="module", params=SAMPLE, ids=lambda p: "_".join(p))
+@pytest.fixture(scope="module", params=[pytest.param(p, id="_".join(p), marks=() if quick("_".join(p), "numba")
+                                                    else pytest.mark.heavy) for p in SAMPLE])
 def pair(request):
     element, law, quadrature = request.param
     return load_kernel(element, law, quadrature, backend="numba"), load_kernel(element, law, quadrature, backend="c")
@@ -54,6 +59,7 @@ def test_same_metadata(pair):
     assert differ == {"templates"}
 
 
+@pytest.mark.heavy
 def test_same_results(pair):
     numba, c = pair
     exact = numba.quadrature == "exact"          # needs straight edges: no node perturbation
@@ -89,17 +95,19 @@ def test_inverted_elements_same_error():
         np.testing.assert_array_equal(errors[1].elements, [2, 5])
 
 
-def test_degenerate_and_curved_rest_elements():
-    for element, law, quadrature, X in [
-        ("tetra", "stvk", "gauss1", random_elements("tetra", 4, seed=5)[:, [1, 0, 2, 3]]),   # mirrored
-        ("triangle6", "hooke", "exact", random_elements("triangle6", 4, seed=5, distortion=0.1)),  # curved
-    ]:
-        messages = []
-        for backend in ("numba", "c"):
-            with pytest.raises(DegenerateElementError) as info:
-                load_kernel(element, law, quadrature, backend=backend).constants(X, E=1e3, nu=0.3)
-            messages.append(str(info.value))
-        assert messages[0] == messages[1]
+@pytest.mark.parametrize("element, law, quadrature, rest", [
+    ("tetra", "stvk", "gauss1", "mirrored"),
+    pytest.param("triangle6", "hooke", "exact", "curved", marks=pytest.mark.heavy),   # a numba module of its own
+])
+def test_degenerate_and_curved_rest_elements(element, law, quadrature, rest):
+    X = (random_elements("tetra", 4, seed=5)[:, [1, 0, 2, 3]] if rest == "mirrored"
+         else random_elements("triangle6", 4, seed=5, distortion=0.1))
+    messages = []
+    for backend in ("numba", "c"):
+        with pytest.raises(DegenerateElementError) as info:
+            load_kernel(element, law, quadrature, backend=backend).constants(X, E=1e3, nu=0.3)
+        messages.append(str(info.value))
+    assert messages[0] == messages[1]
 
 
 def test_wrong_arrays_refused():
@@ -131,12 +139,14 @@ def test_source_deterministic_with_metadata():
 
 
 # -- library cache ----------------------------------------------------------------------------
-ENTRY = Entry("tetra", "stvk", "gauss1")
+# The cheapest C build of the quick pool (helpers.QUICK_KERNELS): the tests below that are about
+# compiling build it again in a fresh cache; the others start from a copy of the session's library.
+ENTRY = Entry("triangle", "hooke", "gauss1")
 
 LOAD = """
 import json
 from tensormass.runtime.kernels.kernels import load_kernel
-m = load_kernel("tetra", "stvk", "gauss1", backend="c").module
+m = load_kernel("triangle", "hooke", "gauss1", backend="c").module
 print(json.dumps({"compiled": m.COMPILED, "library": str(m.LIBRARY), "seconds": m.COMPILE_SECONDS}))
 """
 
@@ -157,30 +167,41 @@ def load_in_new_process(cache) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def check_module(module):
-    """The library computes what numba computes."""
-    numba = load_kernel("tetra", "stvk", "gauss1", backend="numba")
-    X = random_elements("tetra", 5, seed=1)
-    D = numba.constants(X, E=1e3, nu=0.3)
+@pytest.fixture(scope="module")
+def reference():
+    """ENTRY's kernel from the session's cache (module scope: loaded before a test points
+    TENSORMASS_CACHE at its own folder)."""
+    return load_kernel(ENTRY.element, ENTRY.law, ENTRY.quadrature, backend="c")
+
+
+def check_module(module, reference):
+    """The library computes what the session's library of the same kernel computes."""
+    X = random_elements(ENTRY.element, 5, seed=1)
+    D = reference.constants(X, E=1e3, nu=0.3)
     u = 0.05 * np.random.default_rng(2).standard_normal(X.shape)
-    f, K, flags = np.empty((5, 12)), np.empty((5, 12, 12)), np.zeros(5, np.int32)
+    n = reference.n_dofs
+    f, K, flags = np.empty((5, n)), np.empty((5, n, n)), np.zeros(5, np.int32)
     module.forces_and_stiffness(D, u, f, K, flags)
-    fn, Kn = numba.forces_and_stiffness(D, u)
-    close(f, fn, "f")
-    close(K, Kn, "K")
+    fr, Kr = reference.forces_and_stiffness(D, u)
+    assert np.abs(fr).max() > 0 and np.abs(Kr).max() > 0
+    close(f, fr, "f")
+    close(K, Kr, "K")
 
 
 @pytest.fixture
-def built(tmp_path, monkeypatch):
-    """A library built by another process into an empty cache: (cache folder, library path)."""
-    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
-    monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
-    first = load_in_new_process(tmp_path)
-    assert first["compiled"] and first["seconds"] > 0
-    return tmp_path, first["library"]
+def built(tmp_path, monkeypatch, reference):
+    """A cache holding a library another process built: the session's library of ENTRY and its
+    checksum sidecar, copied into an empty cache (cache folder, library path)."""
+    session_library = Path(reference.module.LIBRARY)
+    folder = tmp_path / session_library.parent.parent.name / session_library.parent.name
+    folder.mkdir(parents=True)
+    for path in (session_library, session_library.with_name(session_library.name + ".sha256")):
+        shutil.copy2(path, folder / path.name)
+    monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))      # the session's flags: the same library name
+    return tmp_path, str(folder / session_library.name)
 
 
-def test_second_process_does_not_recompile(built):
+def test_second_process_does_not_recompile(built, reference):
     cache, library = built
     mtime = os.stat(library).st_mtime_ns
     second = load_in_new_process(cache)
@@ -192,11 +213,11 @@ def test_second_process_does_not_recompile(built):
     assert str(module.LIBRARY) == library and not module.COMPILED
     assert module.COMPILE_SECONDS == 0 and module.COMPILE_MAXRSS_MB == 0
     assert len(cc.COMPILATIONS) == before
-    check_module(module)
+    check_module(module, reference)
 
 
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "no-sidecar"])
-def test_damaged_library_is_rebuilt(built, damage):
+def test_damaged_library_is_rebuilt(built, reference, damage):
     _, library = built
     data = open(library, "rb").read()
     if damage == "garbage":
@@ -211,13 +232,14 @@ def test_damaged_library_is_rebuilt(built, damage):
     assert module.COMPILED and module.COMPILE_SECONDS > 0 and module.COMPILE_MAXRSS_MB > 0
     assert str(module.LIBRARY) == library
     assert cc.COMPILATIONS[-1]["library"] == library
-    check_module(module)
+    check_module(module, reference)
     leftovers = [p for p in os.listdir(os.path.dirname(library)) if p.endswith(".tmp")]
     assert leftovers == []
 
 
-def test_concurrent_builds(tmp_path, monkeypatch):
-    """Processes compiling the same kernel at once all get a working library; no temporary files stay."""
+def test_concurrent_builds(tmp_path, monkeypatch, reference):
+    """Processes compiling the same kernel at once into an empty cache all get a working library;
+    no temporary files stay."""
     monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
     monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
     source_path(ENTRY)                         # generate the source once, then race the compilers
@@ -229,10 +251,11 @@ def test_concurrent_builds(tmp_path, monkeypatch):
         out, err = proc.communicate(timeout=300)
         assert proc.returncode == 0, err
         results.append(json.loads(out.strip().splitlines()[-1]))
+    assert any(r["compiled"] for r in results)          # the cache was empty: someone compiled
     assert len({r["library"] for r in results}) == 1
     module = c_module(ENTRY)
     assert not module.COMPILED
-    check_module(module)
+    check_module(module, reference)
     folder = os.path.dirname(results[0]["library"])
     assert [p for p in os.listdir(folder) if p.endswith(".tmp")] == []
 
@@ -276,10 +299,10 @@ def test_a_scenes_kernels_are_built_together_and_then_loaded_without_compiling(t
     from tensormass.runtime.kernels.kernels import prepare_kernels
     monkeypatch.setenv("TENSORMASS_CACHE", str(tmp_path))
     monkeypatch.delenv("TENSORMASS_CFLAGS", raising=False)
-    triples = [("tetra", "hooke", "gauss1"), ("triangle", "stvk", "gauss1")]
+    triples = [("triangle", "hooke", "gauss1"), ("triangle", "measure_volume", "gauss1")]   # cheap builds
     before = len(cc.COMPILATIONS)
     prepare_kernels(triples + triples[:1], "c")
-    assert sorted(r["name"] for r in cc.COMPILATIONS[before:]) == ["tetra_hooke_gauss1", "triangle_stvk_gauss1"]
+    assert sorted(r["name"] for r in cc.COMPILATIONS[before:]) == ["triangle_hooke_gauss1", "triangle_measure_volume_gauss1"]
     prepare_kernels(triples, "c")                  # nothing left to build
     assert len(cc.COMPILATIONS) == before + 2
     for triple in triples:

@@ -14,6 +14,8 @@ from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.kernels.fused import block_positions, node_block_positions
 from tensormass.runtime.mesh.bars import generate_bar
 
+from helpers import quick
+
 QUADRATURE = {"tetra": "gauss1", "triangle": "gauss1", "tetra10": "gauss2", "triangle6": "gauss2",
               "hexahedron": "gauss2", "quad": "gauss2", "wedge": "gauss2", "pyramid": "gauss2"}
 
@@ -24,15 +26,23 @@ CASES = [  # (mesh element, law, cells, size)
     ("wedge", "stable_neohookean", (2, 2, 2), (1.0, 1.0, 1.0)),
     ("pyramid", "stvk", (2, 2, 1), (1.0, 1.0, 0.5)),
     ("triangle", "neohookean", (4, 3), (2.0, 1.0)),
+    ("triangle", "mooney_rivlin", (4, 3), (2.0, 1.0)),
     ("quad", "stvk", (4, 3), (2.0, 1.0)),
     ("hexahedron", "hooke", (3, 2, 2), (1.5, 1.0, 1.0)),
+    ("hexahedron", "neohookean", (3, 2, 2), (1.5, 1.0, 1.0)),
     ("mixed", "neohookean", (8, 2, 2), (4.0, 1.0, 1.0)),      # hex | wedge | pyramid | tetra parts, shared nodes
 ]
-# Every case with C; with numba, two cases by default (its first compile of a kernel takes 5 to 20 s)
-# and every case in CI's heavy step.
-NUMBA_DEFAULT = {("quad", "stvk"), ("wedge", "stable_neohookean")}
+MIXED = ("hexahedron", "wedge", "pyramid", "tetra")
+
+
+def _quick(element, law, backend):
+    """Whether every kernel of the case is in the quick suite's pools (helpers.QUICK_KERNELS,
+    QUICK_NUMBA_KERNELS: compiled once for the suite); the other cases run in CI's heavy step."""
+    return all(quick(f"{e}_{law}_{QUADRATURE[e]}", backend) for e in (MIXED if element == "mixed" else (element,)))
+
+
 BACKEND_CASES = [pytest.param(*case, backend, id=f"{case[0]}-{case[1]}-{backend}",
-                              marks=() if backend == "c" or case[:2] in NUMBA_DEFAULT else pytest.mark.heavy)
+                              marks=() if _quick(case[0], case[1], backend) else pytest.mark.heavy)
                  for case in CASES for backend in ("numba", "c")]
 
 
@@ -128,6 +138,6 @@ def test_fused_refuses_bad_inputs_and_flags_inverted_elements(backend):
 
 def test_numba_kernels_release_the_gil():
     """Every generated numba function is compiled nogil (the runtime may run them in threads)."""
-    module = tm.load_kernel("tetra", "neohookean", "gauss1", backend="numba").module
+    module = tm.load_kernel("tetra", "stvk", "gauss1", backend="numba").module
     for name in ("constants", "energy", "forces", "stiffness", "forces_and_stiffness", "forces_and_stiffness_scatter"):
         assert getattr(module, name).targetoptions.get("nogil") is True, name

@@ -101,8 +101,9 @@ def test_finite_check_tolerates_an_overflowing_sum():
         Kernel._finite(u)
 
 
-def test_flagged_elements_raise_with_buffers():
-    k = load_kernel("tetra", "neohookean", "gauss1", "numba")
+@pytest.mark.parametrize("backend", ["c", pytest.param("numba", marks=pytest.mark.heavy)])   # numba: a module of its own
+def test_flagged_elements_raise_with_buffers(backend):
+    k = load_kernel("tetra", "neohookean", "gauss1", backend)
     D, u = batch(k, n=6)
     u[3] = -2.0 * batch.X[3]                           # element 3 point-mirrored: F = -I, det F < 0
     f, K = np.empty((6, 12)), np.empty((6, 12, 12))
