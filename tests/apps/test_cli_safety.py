@@ -42,7 +42,7 @@ name = "bar"
 {mesh}
 [[material]]
 law = "{law}"
-quadrature = "gauss2"
+quadrature = "{quadrature}"
 E = 1.0e8
 nu = 0.3
 density = 800.0
@@ -59,9 +59,9 @@ BAR = 'generate = "bar"\nsize = [1.0, 0.2, 0.2]\ncells = [4, 1, 1]\nelement = "h
 STATIC = 'kind = "static"\nsteps = {steps}'
 
 
-def scene_file(folder: Path, steps=2, solver=None, mesh=BAR, name="bar.toml", law="stvk") -> Path:
+def scene_file(folder: Path, steps=2, solver=None, mesh=BAR, name="bar.toml", law="stvk", quadrature="gauss2") -> Path:
     path = folder / name
-    path.write_text(SCENE.format(mesh=mesh, solver=solver or STATIC.format(steps=steps), law=law))
+    path.write_text(SCENE.format(mesh=mesh, solver=solver or STATIC.format(steps=steps), law=law, quadrature=quadrature))
     return path
 
 
@@ -499,13 +499,14 @@ def test_unusable_kernel_cache(tmp_path, capsys, monkeypatch, cache):
         deny_writes(monkeypatch, root)
     monkeypatch.setenv("TENSORMASS_CACHE", str(root))
     kernels.load_kernel.cache_clear()              # kernels loaded by earlier tests are not reused
-    # neohookean: its numba kernel on hexahedra is one other tests compile too (the stvk one takes 12 s)
-    scene = scene_file(tmp_path, solver=STATIC.format(steps=1) + '\nbackend = "c"', name="c.toml", law="neohookean")
+    # Hooke on one-point tetrahedra: the numba kernel the adversarial cache cases run too (a numba
+    # kernel no other test runs costs 5 to 12 s of numba compile here)
+    tetra = dict(mesh=BAR.replace('"hexahedron"', '"tetra"'), law="hooke", quadrature="gauss1")
+    scene = scene_file(tmp_path, solver=STATIC.format(steps=1) + '\nbackend = "c"', name="c.toml", **tetra)
     code, _, err = run(capsys, "run", scene, "--quiet")
     assert code == 2 and "TENSORMASS_CACHE" in err and str(root) in err and "Traceback" not in err
-    assert "compiling C kernel hexahedron_neohookean_gauss2" in err
-    numba = scene_file(tmp_path, solver=STATIC.format(steps=1) + '\nbackend = "numba"', name="numba.toml",
-                       law="neohookean")
+    assert "compiling C kernel tetra_hooke_gauss1" in err
+    numba = scene_file(tmp_path, solver=STATIC.format(steps=1) + '\nbackend = "numba"', name="numba.toml", **tetra)
     code, _, err = run(capsys, "run", numba, "--quiet")
     assert code == 0, err
     kernels.load_kernel.cache_clear()
