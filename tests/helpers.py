@@ -32,7 +32,8 @@ QUICK_KERNELS = frozenset(
     + ["triangle_mooney_rivlin_gauss1", "triangle_hooke_gauss1",      # triangle_hooke_gauss1: the tangent
        "quad_hooke_gauss3", "triangle6_stvk_exact", "triangle6_hooke_exact"]   # at rest of the one before
     + [f"{e}_measure_{m}_gauss2" for e in _ELEMENTS for m in ("volume", "dilatation", "green_dilatation")]
-    + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")])
+    + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")]
+    + ["tetra_mss_discrete", "triangle_mss_discrete"])          # the lattice laws on their cheap elements
 # Generated numba modules (5 to 30 s of numba compile each, cold): only tests about numba itself
 # (C = numba, the numba backend's own behaviour) load them, and from these.
 QUICK_NUMBA_KERNELS = frozenset(["tetra_hooke_gauss1", "tetra_stvk_gauss1", "triangle_mooney_rivlin_gauss1",

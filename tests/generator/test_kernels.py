@@ -17,7 +17,7 @@ from tensormass import laws
 from tensormass.generator.catalogue import entries
 from tensormass.generator.derivatives import law_derivatives
 
-from helpers import FULL_CATALOGUE, QUICK_KERNELS, catalogue_selection, fd_gradient, random_elements, reference_nodes, relative_error
+from helpers import FULL_CATALOGUE, QUICK_KERNELS, QUICK_NUMBA_KERNELS, catalogue_selection, fd_gradient, random_elements, reference_nodes, relative_error
 
 pytestmark = pytest.mark.catalogue
 
@@ -43,6 +43,13 @@ def test_the_sample_covers_every_element_law_and_quadrature():
         assert SAMPLE <= QUICK_KERNELS, sorted(SAMPLE - QUICK_KERNELS)
         hooke = {f"{e.element}_hooke_{e.quadrature}" for e in CATALOGUE}
         assert hooke <= QUICK_KERNELS, sorted(hooke - QUICK_KERNELS)
+
+
+def test_the_quick_pool_is_in_the_catalogue():
+    from tensormass.generator.catalogue import catalogue
+    names = {e.name for e in catalogue()}
+    assert QUICK_KERNELS <= names, sorted(QUICK_KERNELS - names)
+    assert QUICK_NUMBA_KERNELS <= QUICK_KERNELS
 
 
 def kernel(entry):
