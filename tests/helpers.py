@@ -33,6 +33,7 @@ QUICK_KERNELS = frozenset(
        "quad_hooke_gauss3", "triangle6_stvk_exact", "triangle6_hooke_exact"]   # at rest of the one before
     + [f"{e}_measure_{m}_gauss2" for e in _ELEMENTS for m in ("volume", "dilatation", "green_dilatation")]
     + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")]
+    + ["triangle_measure_volume_gauss1"]         # the one-point triangle mooney_rivlin's nodal pressure
     + ["tetra_mss_discrete", "triangle_mss_discrete"])          # the lattice laws on their cheap elements
 # Generated numba modules (5 to 30 s of numba compile each, cold): only tests about numba itself
 # (C = numba, the numba backend's own behaviour) load them, and from these.
