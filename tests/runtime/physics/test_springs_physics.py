@@ -43,6 +43,8 @@ def poisson(law, nu):
     return -lateral / 1.0e-3
 
 
+# the cube lattice kernels (30 s of gcc for hybmss) are compiled in CI's heavy step
+@pytest.mark.heavy
 @pytest.mark.parametrize("nu", [0.0, 0.25, 0.45])
 def test_hybmss_has_the_poisson_ratio_it_is_given_and_the_plain_lattice_does_not(nu):
     """On the same bar and clamps as Hooke's finite elements (which share the end effects), HybMSS

@@ -9,6 +9,11 @@ import tensormass as tm
 from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.base.errors import SceneError
 
+# The cube lattices' C kernels take 30 s (hybmss, 877 kB of C) and 10 s (mss) of gcc: the tests that
+# load them run in CI's heavy step; the quick suite runs springs on tetrahedra (mss) and checks the
+# lattice scenes' parsing and refusals, which load no kernel.
+CUBE_LATTICE = pytest.mark.heavy
+
 SCENE = """
 [mesh]
 generate = "bar"
@@ -85,12 +90,14 @@ def test_switching_to_a_spring_law_is_refused():
               extra='[[adapt]]\ncriterion = "R_L"\nthreshold = 0.1\nlaw = "mss"')
 
 
+@CUBE_LATTICE
 def test_cells_that_are_not_cubes_are_refused_with_their_ids():
     s = scene(nx=4)                 # 0.2 x 0.1 x 0.1 cells: bricks
     with pytest.raises(TensormassError, match="must be cubes"):
         run(s)
 
 
+@CUBE_LATTICE
 def test_static_cantilever_is_close_to_the_finite_elements():
     """HybMSS reproduces E and nu at small strain: a cantilever under its weight bends like the
     hexahedral FEM of the same mesh (2 cubes across, measured: HybMSS 12 % stiffer than Hooke
@@ -102,6 +109,7 @@ def test_static_cantilever_is_close_to_the_finite_elements():
     assert [k["law"] for k in hyb.kernels] == ["hybmss"] and hyb.kernels[0]["quadrature"] == "discrete"
 
 
+@CUBE_LATTICE
 def test_mixed_spring_and_finite_element_regions():
     """One mesh, the clamped half HybMSS and the free half Hooke: one model, both kernels, one solve."""
     materials = (MATERIAL.format(law="hybmss", more="box = [[-1, -1, -1], [0.4, 1, 1]]")
@@ -115,6 +123,7 @@ def test_mixed_spring_and_finite_element_regions():
     assert tip(fem)[2] < tip(mixed)[2] < tip(hyb)[2]
 
 
+@CUBE_LATTICE
 @pytest.mark.parametrize("kind, dt, steps", [("implicit_euler", 0.01, 5), ("explicit", 2e-5, 40)])
 def test_dynamic_runs_of_a_spring_lattice(kind, dt, steps):
     """Implicit Euler (chapter 3's scheme) and explicit steps on the Baudet lattice: the body sags,
@@ -129,6 +138,7 @@ def test_edge_springs_on_tetrahedra_run_and_sag():
     assert out.status == "ok" and tip(out)[2] < 0
 
 
+@CUBE_LATTICE
 def test_stress_fields_of_spring_cells_are_written(tmp_path):
     """Output fields of spring cells come from the homogenised record (F, virial stress)."""
     s = scene(extra=f'[output]\ndir = "{tmp_path}"\nfields = ["von_mises@cell", "energy_density"]')
@@ -141,6 +151,7 @@ def test_stress_fields_of_spring_cells_are_written(tmp_path):
     assert np.all(np.isfinite(vm)) and vm.max() > 0
 
 
+@CUBE_LATTICE
 def test_a_static_lattice_held_by_sliding_supports_only_is_refused():
     """HybMSS with A = 0 has a zero-energy mode per cube: between sliding plates (bottom held in z,
     one corner pinned in x and y, a second in y) the static stiffness is singular and the run is
