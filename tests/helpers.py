@@ -41,6 +41,16 @@ QUICK_NUMBA_KERNELS = frozenset(["tetra_hooke_gauss1", "tetra_stvk_gauss1", "tri
                                  "hexahedron_neohookean_gauss2"])
 
 
+def has_c_compiler() -> bool:
+    """Whether the C backend finds a compiler here (tests of C builds skip without one)."""
+    from tensormass.backends.c import loader
+    try:
+        loader.compiler()
+    except Exception:                                        # noqa: BLE001 - any failure: no compiler
+        return False
+    return True
+
+
 def quick(name: str, backend: str = "c") -> bool:
     """Whether the quick suite may load the kernel `name` with `backend` (the pools above)."""
     return name in (QUICK_NUMBA_KERNELS if backend == "numba" else QUICK_KERNELS)
