@@ -392,14 +392,14 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
 
 
 def cmd_run(args) -> int:
-    from ..runtime.scene.parser import picture_field
+    from ..runtime.scene.parser import set_picture
     from ..runtime.scene.scene import Scene
     scene = Scene.from_toml(args.scene, max_memory=getattr(args, "max_memory", None))
     if getattr(args, "threads", None) is not None:       # --threads overrides [solver] threads
         from ..runtime.base.parallel import parse_threads
         scene.solver.threads = parse_threads(args.threads, "--threads")
     if getattr(args, "picture", None) is not None:      # --picture [FIELD] / --plot override [output]
-        scene.output.picture = picture_field(True if args.picture == "" else args.picture, "--picture")
+        set_picture(scene.output, True if args.picture == "" else args.picture, "--picture")
     if getattr(args, "plot", False):
         scene.output.plot = True
     if getattr(args, "view", None) is not None:         # --view overrides [output] view

@@ -26,6 +26,7 @@ COMPILE_GROUPS = {
         "tests/runtime/physics/test_shells.py::",
         "tests/runtime/run/test_exit_codes_outputs.py::test_a_bare_picture_of_a_corotational_shell",
         "tests/runtime/run/test_exit_codes_outputs.py::test_a_named_field_the_kernels_cannot_give",
+        "tests/runtime/run/test_exit_codes_outputs.py::test_von_mises_named_on_a_corotational_shell",
     ),
     # the cube lattices' C kernels (hybmss: 877 kB of C, about 30 s of gcc; mss: about 10 s); most of
     # their tests run in CI's heavy step

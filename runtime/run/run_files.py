@@ -74,6 +74,7 @@ class RunFiles:
             self.writer.keep_lock = True         # the folder stays locked until finish() wrote the summary
         self.summary_path = None if self.out_dir is None else self.out_dir / SUMMARY_NAME
         self.picture = scene.output.picture              # a field name, or None
+        self.picture_named = scene.output.picture_named  # named: drawn or refused, never replaced
         self.plot = scene.output.plot
         self.picture_note = None                         # why the default field was not drawn
         self.data = None
@@ -106,10 +107,11 @@ class RunFiles:
 
         The default field (picture = true, a bare --picture: von Mises) falls back to the
         displacement where a kernel gives no stress (co-rotational shells): the picture is then
-        <dir>/displacement.png, and the summary's output says why (picture_note)."""
+        <dir>/displacement.png, and the summary's output says why (picture_note). A field the scene
+        names (picture = "von_mises") is drawn or refused."""
         if not self.picture:
             return
-        if self.picture == PICTURE_DEFAULT:
+        if self.picture == PICTURE_DEFAULT and not self.picture_named:
             bare = next((p for p in sim.model.parts if not has_stress(p.kernel)), None)
             if bare is not None:
                 kernel = f"{bare.element}/{bare.law}/{bare.quadrature}"

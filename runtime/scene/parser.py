@@ -643,7 +643,7 @@ class Parser(ValueParser):
                                  f"(known fields: {', '.join(FIELDS)})")
             out.fields = check_field_names(t["fields"], "output.fields", SceneError)
         if "picture" in t:                # true: von Mises; a field name; false: none (runtime.run.picture)
-            out.picture = picture_field(t["picture"], "output.picture")
+            set_picture(out, t["picture"], "output.picture")
         if "plot" in t:
             out.plot = self.boolean(t["plot"], "output.plot")
         if "view" in t:                   # the picture's camera (runtime.run.picture)
@@ -699,6 +699,13 @@ def view_text(text: str, key: str = "--view") -> tuple:
         raise SceneError(f"{key}: expected a view name ({', '.join(VIEWS)}) or AZIMUTH,ELEVATION in degrees, "
                          f"got {text!r}") from None
     return view_angles(value, key)
+
+
+def set_picture(output, value, key: str) -> None:
+    """[output] picture / run --picture into the scene's output: the field, and whether it was named
+    (a named field is drawn or refused; the default may fall back to the displacement)."""
+    output.picture = picture_field(value, key)
+    output.picture_named = isinstance(value, str)
 
 
 def picture_field(value, key: str) -> str | None:

@@ -122,6 +122,7 @@ class Output:
     every: int = 1
     fields: tuple | None = None           # names from runtime.physics.fields.FIELDS; None: its DEFAULT_FIELDS
     picture: str | None = None            # a PNG of the deformed body coloured by this field at the end
+    picture_named: bool = False           # the field was named ("von_mises"), not picture = true's default
     plot: bool = False                    # the per-step history as a PNG beside the summary
     view: tuple | None = None             # the picture's camera (azimuth, elevation) in degrees; None: (-60, 20)
     clip: tuple | None = None             # the picture's cut-away ((point), (normal)): the side the normal points to is removed

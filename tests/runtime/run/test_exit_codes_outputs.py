@@ -128,6 +128,25 @@ def test_a_named_field_the_kernels_cannot_give_is_still_refused(tmp_path, capsys
     assert "refused before the first step" in capsys.readouterr().err
 
 
+def test_von_mises_named_on_a_corotational_shell_is_refused_not_replaced(tmp_path, capsys):
+    """Only the default field falls back to the displacement: a named von_mises is the user's
+    choice, refused before the first step with the kernel that lacks the stress records."""
+    rc, out = _run(tmp_path, "shell", "--picture", "von_mises", text=plate(corotational=True))
+    err = capsys.readouterr().err
+    assert rc == 2 and not out.exists()
+    assert "picture of 'von_mises'" in err and "refused before the first step" in err
+    assert "--picture displacement" in err
+
+
+def test_the_scene_keeps_whether_the_picture_field_was_named():
+    from tensormass.runtime.scene.parser import set_picture
+    from tensormass.runtime.scene.types import Output
+    for value, field, named in ((True, "von_mises", False), ("von_mises", "von_mises", True), (False, None, False)):
+        out = Output()
+        set_picture(out, value, "output.picture")
+        assert (out.picture, out.picture_named) == (field, named)
+
+
 def test_a_clip_that_keeps_no_cell_names_the_clip_not_the_field(tmp_path, capsys):
     """A clip refusal says what the clip does wrong and how to mend it; no other picture field helps."""
     rc, out = _run(tmp_path, "bar", "--picture", text=bar(output="clip = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]"))
