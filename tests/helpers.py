@@ -35,8 +35,9 @@ QUICK_KERNELS = frozenset(
     + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")]
     + ["triangle_measure_volume_gauss1"]         # the one-point triangle mooney_rivlin's nodal pressure
     + ["tetra_mss_discrete", "triangle_mss_discrete"])          # the lattice laws on their cheap elements
-# Generated numba modules (5 to 30 s of numba compile each, cold): only tests about numba itself
-# (C = numba, the numba backend's own behaviour) load them, and from these.
+# Generated numba modules (5 to 30 s of numba compile each, cold): the tests about numba itself
+# (C = numba, the numba backend's own behaviour, the benchmarks that time both backends) load
+# these; every other test runs the default backend (C).
 QUICK_NUMBA_KERNELS = frozenset(["tetra_hooke_gauss1", "tetra_stvk_gauss1", "triangle_mooney_rivlin_gauss1",
                                  "hexahedron_neohookean_gauss2"])
 
