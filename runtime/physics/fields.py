@@ -185,26 +185,30 @@ def resolve(model, names=None) -> tuple:
     return tuple(n for n in DEFAULT_FIELDS if not FIELDS[n].records)
 
 
-def check_available(model, names, providers=()) -> None:
+FIELDS_REMEDY = "ask only for material, law or region, or set [output] fields = []"
+
+
+def check_available(model, names, providers=(), key="output.fields", remedy=FIELDS_REMEDY) -> None:
     """Refuse (TensormassError) fields this model cannot give: stress and strain fields need every
-    part's kernel to have stress(); provided fields (reaction) need their provider."""
+    part's kernel to have stress(); provided fields (reaction) need their provider. key names the
+    request in the message and remedy says what to ask instead."""
     names = list(locations(check_names(list(names), "fields")))
     asked = [n for n in names if FIELDS[n].records]
     for part in model.parts if asked else ():
         if not has_stress(part.kernel):
-            raise _no_stress(part, asked)
+            raise _no_stress(part, asked, key, remedy)
     for n in names:
         if n in PROVIDED and n not in providers:
-            raise TensormassError(f"output.fields: field {n!r} is computed by {PROVIDED[n]}, which this run "
+            raise TensormassError(f"{key}: field {n!r} is computed by {PROVIDED[n]}, which this run "
                                   "does not provide")
 
 
-def _no_stress(part, asked) -> TensormassError:
+def _no_stress(part, asked, key="output.fields", remedy=FIELDS_REMEDY) -> TensormassError:
+    # kernels without stress(): hand-written ones (runtime.kernels.custom_kernels) and the
+    # co-rotational shell wrapper
     return TensormassError(
-        f"output.fields: {', '.join(asked)} need the stress records of every kernel, and the kernel for "
-        f"{part.element}/{part.law}/{part.quadrature} ({part.kernel!r}) has no stress() (a hand-written "
-        "kernel, runtime.kernels.custom_kernels.Kernel): ask only for material, law or region, or set "
-        "[output] fields = []")
+        f"{key}: {', '.join(asked)} need the stress records of every kernel, and the kernel for "
+        f"{part.element}/{part.law}/{part.quadrature} ({part.kernel!r}) has no stress(): {remedy}")
 
 
 class FieldEvaluator:

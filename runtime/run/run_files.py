@@ -120,11 +120,12 @@ class RunFiles:
         field = self.picture
         refused = f"picture of {field!r} ([output] picture / --picture) cannot be drawn for this scene, refused " \
                   "before the first step: "
-        try:
-            if field not in ("displacement", "u"):
-                check_available(sim.model, [field], sim._field_providers())
-        except TensormassError as exc:
-            raise TensormassError(f"{refused}{exc} (a picture of the displacement: --picture displacement)") from None
+        if field not in ("displacement", "u"):
+            try:
+                check_available(sim.model, [field], sim._field_providers(), key="picture",
+                                remedy="draw the displacement (--picture displacement)")
+            except TensormassError as exc:
+                raise TensormassError(f"{refused}{exc}") from None
         try:
             pictures.check_picture(sim.model)             # the scene's view and clip included
         except TensormassError as exc:       # the mesh, view or clip: no other field would help

@@ -135,7 +135,8 @@ def test_von_mises_named_on_a_corotational_shell_is_refused_not_replaced(tmp_pat
     err = capsys.readouterr().err
     assert rc == 2 and not out.exists()
     assert "picture of 'von_mises'" in err and "refused before the first step" in err
-    assert "--picture displacement" in err
+    assert "the kernel for shell/cst_dkt/exact" in err and "draw the displacement (--picture displacement)" in err
+    assert "output.fields" not in err and "fields = []" not in err      # advice for the picture, not the frames
 
 
 def test_the_scene_keeps_whether_the_picture_field_was_named():
