@@ -240,6 +240,7 @@ class Model:
         self.motion = Motion(self, list(fixed), self.amplitudes)
         self.probes = {p.name: self._probe(p, i) for i, p in enumerate(probes)}   # runtime.mesh.probes.PointProbe
         self.scene = None
+        self.contact = None                 # runtime.contact: IPC or penalty contact (Model.from_scene)
         self.build_time = time.perf_counter() - start
 
     @classmethod
@@ -253,6 +254,10 @@ class Model:
         # the scene's estimate covers the whole run (refinement included) when it has one
         model.estimate = getattr(scene, "estimate", None) or model.estimate
         model.scene = scene
+        # [contact] / [[obstacle]] (runtime.contact): refused here, before the first step, when the body
+        # starts intersecting an obstacle or the solver does not take the method
+        from ..contact.base import build_contact
+        model.contact = build_contact(model)
         return model
 
     def rebuilt(self, mesh: Mesh, check: bool = True) -> "Model":

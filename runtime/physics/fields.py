@@ -91,6 +91,9 @@ FIELDS = {f.name: f for f in (
     # evaluate() through `providers` (Simulation.fields passes it), never computed here.
     Field("reaction", "reaction force at constrained nodes (runtime.physics.reactions)", "N", "vector", _POINT,
           records=False),
+    # runtime.contact's, through `providers` too: zero off the contact surface
+    Field("contact_force", "force the contact (obstacles, other bodies, the body itself) exerts on each node "
+          "(runtime.contact)", "N", "vector", _POINT, records=False),
 )}
 
 # The default of [output] fields: what one looks at first (von Mises: the usual colour map, and

@@ -72,8 +72,8 @@ class Static(_Integrator):
         ctx, lam = self.ctx, k / self.n_steps
         before = ctx.newton_iterations
         potential = Potential(ctx.asm, self.external_force(lam), lam)
-        ctx.u, _ = newton(ctx, potential, ctx.u, self.prescribed(lam),
-                          f"static: load step {k}/{self.n_steps}")
+        ctx.u = solve_step(ctx, potential, ctx.u, self.prescribed(lam), f"static: load step {k}/{self.n_steps}",
+                           (k - 1) / self.n_steps, lam, 1.0)
         ctx.t = lam
         return {"time": lam, "newton": ctx.newton_iterations - before}
 
@@ -146,16 +146,51 @@ class ImplicitEuler(_Dynamic):
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
             self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
+        contact, extra = self.model.contact, None
+        if contact is not None:             # runtime.contact: linearised like the elastic forces
+            f, extra = self._contact_terms(contact, u, t, h, f)
         dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
         # CG starts from the previous step's dv: consecutive steps change v alike
-        dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv)
+        dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv, extra=extra)
         self._last_dv = dv if h == self.dt else None
         ctx.newton_iterations += 1
+        residual = ctx.asm.matrix(A) @ dv / h - (f - h * Kv)
+        if extra is not None:
+            residual = residual + extra @ dv / h
         v1 = v + dv
+        if contact is not None and contact.method == "ipc":
+            # the one linear solve knows the barrier only to first order: cap the motion by CCD (the
+            # velocity keeps the share of the step taken; the rest is lost, as in an inelastic impact)
+            cap = contact.max_step(u, h * v1)
+            if cap < 1.0 and contact.pose_moving():
+                raise TensormassError(f"implicit_euler: the linearised step to time {t + h:.6g} would pass an "
+                                      "obstacle moving into the body; backward_euler takes such steps (or a smaller dt)")
+            if cap < 1.0:
+                v1[self.model.free_dofs] *= cap
+            contact.accept_pose(1.0)
         u1 = u + h * v1
+        if contact is not None:
+            contact.end_step(u1)
         # the step's equation, A dv / h - (f - h K v) = 0, on every dof: its fixed rows are the reactions
-        ctx.residual = (u1, ctx.reduce(ctx.asm.matrix(A) @ dv / h - (f - h * Kv)))
+        ctx.residual = (u1, ctx.reduce(residual))
         return u1, v1
+
+    def _contact_terms(self, contact, u, t, h, f):
+        """The contact's forces (with, for IPC, the obstacles' move over the step to first order) and
+        h^2 x its Hessian at u."""
+        s0, s1 = t / self.duration, (t + h) / self.duration
+        contact.begin_step(u, s0, s1, h)
+        if contact.method == "ipc":
+            contact.start_stiffness(Potential(self.ctx.asm, f), u)
+            contact.lag_friction(u)
+        else:
+            contact.set_pose(s1)
+        H = contact.hessian(u, True)
+        f = f - contact.gradient(u)
+        pushed = contact.pose_load(u)
+        if pushed is not None:
+            f = f - pushed
+        return f, None if H is None else h * h * H
 
 
 class BackwardEuler(_Dynamic):
@@ -171,7 +206,8 @@ class BackwardEuler(_Dynamic):
         potential = IncrementalPotential(ctx.asm, self.external_force((t + h) / self.duration), self.mass, h, u, v,
                                           self.alpha, K_n)
         target = self.prescribed((t + h) / self.duration)
-        u1, _ = newton(ctx, potential, u, target, f"backward_euler: time {t + h:.6g}")
+        u1 = solve_step(ctx, potential, u, target, f"backward_euler: time {t + h:.6g}", t / self.duration,
+                        (t + h) / self.duration, h)
         return u1, (u1 - u) / h
 
 
@@ -200,6 +236,11 @@ class Explicit(_Dynamic):
         f = f_int + self.external_force(t / self.duration) - self.alpha * self.mass * v
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
+        contact = self.model.contact
+        if contact is not None:             # penalty contact (runtime.contact.penalty) at the step's start
+            contact.begin_step(u, t / self.duration, (t + h) / self.duration, h)
+            contact.set_pose(t / self.duration)
+            f -= contact.gradient(u)
         if self.beta:
             f -= self.beta * stiffness_times(ctx.asm, u, v, f_int, self.model.size)
         v1 = v.copy()
@@ -459,6 +500,9 @@ class GeneralizedAlpha(_Dynamic):
         except InvertedElementError:
             y = u.copy()
         y[fixed] = target_y
+        if model.contact is not None:       # penalty contact at y (runtime.contact.base.METHODS_OF)
+            model.contact.begin_step(u, t / self.duration, (t + h) / self.duration, h)
+            model.contact.set_pose((t + h * (1.0 - af)) / self.duration)
         y, _ = newton(ctx, potential, y, target_y, f"{self.kind}: time {t + h:.6g}")
         u1 = (y - af * u) / (1.0 - af)
         u1[fixed] = target_u
@@ -469,6 +513,27 @@ class GeneralizedAlpha(_Dynamic):
         a1[fixed] = (v1[fixed] - v[fixed]) / h
         self._acc[id(u1)] = (u1, a1)
         return u1, v1
+
+
+def solve_step(ctx, potential, u, target, where, s0, s1, h):
+    """newton() for one step from run fraction s0 to s1, with the scene's contact (runtime.contact).
+
+    IPC: the obstacles move from their pose at s0 to that at s1 within Newton, as prescribed dofs do
+    (each step as far as CCD allows); friction's lagging iterations each re-solve with the normal
+    forces and tangent bases of the state before."""
+    contact = ctx.model.contact
+    if contact is None:
+        return newton(ctx, potential, u, target, where)[0]
+    contact.begin_step(u, s0, s1, h)
+    if contact.method != "ipc":
+        contact.set_pose(s1)
+        return newton(ctx, potential, u, target, where)[0]
+    contact.start_stiffness(potential, u)
+    for _ in range(contact.spec.friction_iterations if contact.spec.mu > 0 else 1):
+        contact.lag_friction(u)
+        u = newton(ctx, potential, u, target, where)[0]
+    contact.end_step(u)
+    return u
 
 
 _KINDS = {"static": Static, "implicit_euler": ImplicitEuler, "backward_euler": BackwardEuler,

@@ -180,11 +180,14 @@ def parse_rotation(parser, raw, key, dim) -> Rotation:
     return Rotation(point=point, angle=angle, axis=axis)
 
 
-def check_amplitude_use(amplitudes, fixed, loads) -> None:
-    """Every amplitude named by a [[fixed]] entry or a load exists, and every table is used (SceneError)."""
+def check_amplitude_use(amplitudes, fixed, loads, obstacles=()) -> None:
+    """Every amplitude named by a [[fixed]] entry, a load or an [[obstacle]] exists, and every table is
+    used (SceneError)."""
     known = {a.name: a for a in amplitudes}
     used = set()
-    for key, name in _references(fixed, loads):
+    references = list(_references(fixed, loads))
+    references += [(f"obstacle[{i}].amplitude", o.amplitude) for i, o in enumerate(obstacles) if o.amplitude is not None]
+    for key, name in references:
         if name in BUILTIN_AMPLITUDES:
             continue
         if name not in known:
@@ -193,7 +196,7 @@ def check_amplitude_use(amplitudes, fixed, loads) -> None:
         used.add(name)
     for i, a in enumerate(amplitudes):
         if a.name not in used:
-            raise SceneError(f"amplitude[{i}]: {a.name!r} is used by no [[fixed]] entry or load; remove it, or "
+            raise SceneError(f"amplitude[{i}]: {a.name!r} is used by no [[fixed]] entry, load or obstacle; remove it, or "
                              f"refer to it with amplitude = {a.name!r}")
 
 

@@ -97,9 +97,10 @@ class Context:
         free = self.model.free_dofs
         return _FLOOR * np.finfo(float).eps * safe_norm((K @ self.cell_size())[free])
 
-    def solve(self, data, b, x_c=None, x0=None):
-        """Eliminate the fixed dofs (values x_c) and solve; counts linear iterations."""
-        x, its = self.system.solve(self.linear, data, b, x_c, x0)
+    def solve(self, data, b, x_c=None, x0=None, extra=None):
+        """Eliminate the fixed dofs (values x_c) and solve; counts linear iterations.
+        extra: a sparse matrix added to the pattern's (contact's Hessian: runtime.contact)."""
+        x, its = self.system.solve(self.linear, data, b, x_c, x0, extra)
         self.linear_iterations += its
         return x
 
@@ -134,6 +135,8 @@ class Potential:
         # its energy is the work along the Newton path (exact on each straight step: see accept)
         self.pressure, self.factor = getattr(asm.model, "pressure", None), float(factor)
         self._anchor = None                         # (u, pressure energy there)
+        # runtime.contact (IPC or penalty): its energy, gradient and Hessian join the potential's
+        self.contact = getattr(asm.model, "contact", None)
 
     def _pressure_energy(self, u):
         if self.pressure is None:
@@ -161,12 +164,15 @@ class Potential:
         work = float(self.f_ext @ u)
         q, _, qmag = self.extra(u)
         P = self._pressure_energy(u)
-        return W - work + q + P, abs(W) + abs(work) + qmag + abs(P)
+        C = 0.0 if self.contact is None else self.contact.energy(u)
+        return W - work + q + P + C, abs(W) + abs(work) + qmag + abs(P) + abs(C)
 
-    def gradient(self, u):
+    def gradient(self, u, contact=True):
         _, dq, _ = self.extra(u)
         g = dq - self.asm.forces(u) - self.f_ext
         g = g if self.pressure is None else g - self.factor * self.pressure.forces(u)
+        if contact and self.contact is not None:
+            g = g + self.contact.gradient(u)
         # hanging nodes (runtime.physics.hanging): the gradient of the constrained problem, P^T g
         hanging = getattr(self.asm.model, "hanging", None)
         return g if hanging is None else hanging.reduce(g)
@@ -180,6 +186,32 @@ class Potential:
         if self.pressure is not None:       # full on open surfaces (LU, see Context), else its symmetric part
             self.pressure.add_stiffness(data, self.asm.pattern, u, self.factor)
         return data
+
+    def contact_matrix(self, u, project):
+        """The contact's Hessian (PSD-projected when project) as a sparse matrix beside the pattern's
+        data, or None."""
+        return None if self.contact is None else self.contact.hessian(u, project)
+
+    def max_step(self, u, d) -> float:
+        """The largest step along d the contact allows (CCD: no intersection on the way); 1 without."""
+        return 1.0 if self.contact is None else self.contact.max_step(u, d)
+
+    # Obstacles moving within a solve (runtime.contact.ipc): a prescribed motion like the fixed dofs'
+    # one, taken by Newton's steps as far as CCD allows (the line search tries them, accept_step keeps).
+    def moving_obstacles(self) -> bool:
+        return self.contact is not None and self.contact.pose_moving()
+
+    def obstacle_load(self, u):
+        """The first-order change of the gradient that the obstacles' remaining move causes, or None."""
+        return None if self.contact is None else self.contact.pose_load(u)
+
+    def try_step(self, a: float) -> None:
+        if self.contact is not None:
+            self.contact.try_pose(a)
+
+    def accept_step(self, a: float) -> None:
+        if self.contact is not None:
+            self.contact.accept_pose(a)
 
 
 class IncrementalPotential(Potential):
@@ -316,13 +348,13 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
     force_scale = max(potential.force_scale(u), 1e-30)
     mixed = MixedPressure(ctx.asm, u) if getattr(ctx.asm, "couplings", None) else None
     # the watchdog needs one energy along the whole path: not with a follower pressure (path work)
-    watchdog = potential.pressure is None
+    watchdog = potential.pressure is None and potential.contact is None
     anchor = None                         # the last certified point while relaxed steps run
     floor, full = 0.0, False
     res = np.inf
     for it in range(1, s.newton_max_iterations + 1):
         du_c = target_c - u[fixed]
-        moving = bool(np.any(du_c))
+        moving = bool(np.any(du_c)) or potential.moving_obstacles()
         # reactions (gradient on fixed dofs) set the force scale when there is no load
         scale = max(force_scale, safe_norm(g[fixed]))
         res = safe_norm(g[free])
@@ -340,11 +372,12 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
                 mixed.restore(anchor["mixed"])
                 mixed.last = anchor["last"]
             watchdog, anchor = False, None
-            found = line_search(potential, u, d, g, Pi, mag, slope, False)
+            found = line_search(potential, u, d, g, Pi, mag, slope, False, a=potential.max_step(u, d))
             if found is None:
                 raise TensormassError(f"{where}: line search failed (residual {res:.3e}); the load step is too "
                                       "large or elements invert: use more steps")
             u, a, Pi, mag, g_new = found[:5]
+            potential.accept_step(a)
             if mixed is not None:
                 mixed.advance(d, a) if mixed.last is not None else mixed.reset(u)
             potential.accept(u)
@@ -355,7 +388,9 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
             data = potential.hessian(u, project)
             if mixed is not None and not project:
                 mixed.correct(u, data)
-            d = ctx.solve(data, -g, du_c)
+            extra = potential.contact_matrix(u, project)
+            pushed = potential.obstacle_load(u)
+            d = ctx.solve(data, -g if pushed is None else -g - pushed, du_c, extra=extra)
         except TensormassError:
             if fallback and not project:            # e.g. CG on an indefinite matrix
                 project = True
@@ -375,7 +410,7 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
                                   "check that every rigid-body motion is fixed")
         # relaxed steps only while this solve has been plain Newton: once a step was cut, the energy decides
         relax = watchdog and not moving and (anchor is None or anchor["count"] < _WATCHDOG)
-        found = line_search(potential, u, d, g, Pi, mag, slope, moving, relax)
+        found = line_search(potential, u, d, g, Pi, mag, slope, moving, relax, a=potential.max_step(u, d))
         if found is None:
             if fallback and not project:
                 project = True
@@ -385,6 +420,7 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
             raise TensormassError(f"{where}: line search failed (residual {res:.3e}); the load step is too "
                                   "large or elements invert: use more steps")
         u_new, a, Pi_new, mag_new, g_new, relaxed = found
+        potential.accept_step(a)
         if relaxed and anchor is None:
             anchor = {"u": u, "g": g, "Pi": Pi, "mag": mag, "d": d, "slope": slope, "count": 0,
                       "mixed": None if mixed is None else mixed.copy(),
@@ -405,7 +441,7 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
             project = False                         # in the basin: back to the exact Hessian
             if mixed is not None:
                 mixed.reset(u)
-        if tiny and not np.any(target_c - u[fixed]):
+        if tiny and not np.any(target_c - u[fixed]) and not potential.moving_obstacles():
             ctx.residual = (u, g)
             return u, it
     res = safe_norm(g[free])
@@ -414,8 +450,9 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
                           f"{floor:.3e}); use more steps or a larger newton_max_iterations")
 
 
-def line_search(potential, u, d, g, Pi0, mag0, slope, moving, relax=False):
+def line_search(potential, u, d, g, Pi0, mag0, slope, moving, relax=False, a=1.0):
     """Backtracking: halve until Pi decreases enough (or, while boundaries move, is finite).
+    a: the first step tried (contact: the largest step CCD allows, below 1 when a pair would cross).
 
     Returns (u, a, Pi, magnitude, gradient or None, relaxed).  Near a solution the energy
     change drowns in round-off (I1 - 3 at small strain cancels ~1/strain^2 digits),
@@ -423,9 +460,11 @@ def line_search(potential, u, d, g, Pi0, mag0, slope, moving, relax=False):
     the residual.  relax: a finite full step is taken even when the energy rises
     (relaxed = True; newton's watchdog decides whether it paid).
     """
-    a = 1.0
+    if not a > 0.0:
+        return None
     for _ in range(_MAX_HALVINGS):
         trial = u + a * d
+        potential.try_step(a)
         Pi, mag = potential.value(trial)
         if moving:
             ok = np.isfinite(Pi)
@@ -441,4 +480,5 @@ def line_search(potential, u, d, g, Pi0, mag0, slope, moving, relax=False):
         if a == 1.0 and relax and np.isfinite(Pi):
             return trial, a, Pi, mag, None, True
         a *= 0.5
+    potential.try_step(0.0)
     return None

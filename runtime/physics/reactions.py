@@ -181,6 +181,9 @@ def _evaluate(ctx, integrator) -> np.ndarray:
     if pressure is not None:
         f = f + (fraction if static else 1.0) * pressure.forces(u)
     r = -f
+    contact = getattr(model, "contact", None)
+    if contact is not None:                 # the obstacles' push on fixed nodes is part of their reaction
+        r = r + contact.gradient(u)
     if not static and np.any(v):
         alpha, beta = (float(x) for x in model.solver.rayleigh)
         if alpha:

@@ -36,6 +36,8 @@ from ..base.files import write_text_atomic
 __all__ = ["History", "SCALAR_KEYS", "units", "write_history_csv", "csv_columns"]
 
 SCALAR_KEYS = ("step", "time", "newton", "linear", "wall", "elastic", "kinetic", "external_work")
+# runtime.contact's record per step (scenes with contact): summary["per_step"]["contact"][key]
+_CONTACT_KEYS = ("pairs", "min_distance", "ccd_fraction", "penetration")
 _COMPONENTS = ("x", "y", "z")
 
 
@@ -45,7 +47,9 @@ def units(dim: int = 3, static: bool = False) -> dict:
     energy = f"J{thick}"
     return {"step": "1", "time": "1" if static else "s", "newton": "1", "linear": "1", "wall": "s",
             "elastic": energy, "kinetic": energy, "external_work": energy, "probes": "m",
-            "reactions.force": f"N{thick}", "reactions.moment": f"N m{thick}"}
+            "reactions.force": f"N{thick}", "reactions.moment": f"N m{thick}",
+            "contact.pairs": "1", "contact.min_distance": "m", "contact.ccd_fraction": "1",
+            "contact.penetration": "m", "obstacles.force": "N", "obstacles.moment": "N m"}
 
 
 class History:
@@ -96,6 +100,10 @@ class History:
                 continue
             if key[0] == "probes":
                 out["probes"][key[1]] = list(values)
+            elif key[0] == "contact":
+                out.setdefault("contact", {})[key[1]] = list(values)
+            elif key[0] == "obstacles":
+                out.setdefault("obstacles", {}).setdefault(key[1], {})[key[2]] = list(values)
             else:
                 out["reactions"].setdefault(key[1], {})[key[2]] = list(values)
         out["stride"] = self.stride
@@ -118,6 +126,13 @@ def _flatten(row: dict) -> dict:
     for name, value in (row.get("reactions") or {}).items():
         flat[("reactions", name, "force")] = _vector(value.get("force"))
         flat[("reactions", name, "moment")] = _vector(value.get("moment"))
+    contact = row.get("contact")
+    if contact:
+        for key in _CONTACT_KEYS:
+            flat[("contact", key)] = contact.get(key)
+        for name, value in contact.get("obstacles", {}).items():
+            flat[("obstacles", name, "force")] = _vector(value.get("force"))
+            flat[("obstacles", name, "moment")] = _vector(value.get("moment"))
     return flat
 
 
@@ -148,6 +163,13 @@ def csv_columns(per_step: dict, unit: dict) -> list:
         for c in range(m):
             axis = "z" if m == 1 else _COMPONENTS[c]
             cols.append((label(f"reaction.{name}.M{axis}", "reactions.moment"), _getter(moment, c)))
+    for key, values in (per_step.get("contact") or {}).items():
+        cols.append((label(f"contact.{key}", f"contact.{key}"), (lambda v: lambda i: v[i])(values)))
+    for name, parts in (per_step.get("obstacles") or {}).items():
+        for part, letter, unit_key in (("force", "F", "obstacles.force"), ("moment", "M", "obstacles.moment")):
+            values = parts.get(part, [])
+            for c in range(_width(values)):
+                cols.append((label(f"obstacle.{name}.{letter}{_COMPONENTS[c]}", unit_key), _getter(values, c)))
     return cols
 
 

@@ -244,7 +244,10 @@ class Simulation:
 
     def _field_providers(self) -> dict:
         """Fields other modules compute: name -> callable() giving the nodal array at the current state."""
-        return {"reaction": lambda: _reactions.reaction_field(self)}      # runtime.physics.reactions
+        providers = {"reaction": lambda: _reactions.reaction_field(self)}      # runtime.physics.reactions
+        if self.model.contact is not None:                                     # runtime.contact
+            providers["contact_force"] = lambda: self.model.contact.nodal_forces(self.ctx.u)
+        return providers
 
     def _frame_fields(self) -> tuple:
         """The scene's fields for a frame: names, or () when there are none or the writer takes no
@@ -338,6 +341,8 @@ class Simulation:
                 raise failure.error from None
             except _Stop as stop:
                 stopped = RunStopped, "diverged", stop.message
+            except _Invalid as invalid:
+                stopped = RunStopped, "invalid", invalid.message
             except KeyboardInterrupt:
                 stopped = RunInterrupted, "interrupted", f"interrupted (Ctrl-C) after step {self._step}"
             except (ValueError, ArithmeticError) as exc:          # TensormassError, a failed step, LinAlgError
@@ -385,6 +390,8 @@ class Simulation:
             self._step = k
             row = {"step": k, "time": info["time"], "newton": info["newton"],
                    "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
+            if model.contact is not None:
+                row["contact"] = self._contact(model.contact, k, info["time"])
             if keep:             # probes and reactions only for the rows the history keeps
                 row["probes"] = model.probe_values(self.ctx.u)
                 row["reactions"] = _as_lists(self.reactions(), ("force", "moment"))
@@ -398,6 +405,21 @@ class Simulation:
                     self.on_step(self)
                 except Exception as exc:
                     raise _CallbackFailed(exc) from exc
+
+    def _contact(self, contact, k: int, t: float) -> dict:
+        """The step's contact record (runtime.contact); IPC: the intersection test every check_every steps
+        (a state that intersects is a bug, and the run stops "invalid"); penalty: the penetration warning."""
+        record = contact.record(self.ctx.u)
+        if contact.method == "ipc" and k % contact.spec.check_every == 0:
+            why = contact.intersecting(self.ctx.u)
+            if why is not None:
+                raise _Invalid(f"step {k}: {why}")
+        depth = record.get("penetration")
+        if depth is not None and depth > contact.max_penetration:
+            self.monitor.warn(k, t, "penetration", f"penalty contact: a vertex is {depth:.3g} m inside an obstacle "
+                              f"(contact.max_penetration {contact.max_penetration:.3g} m); raise contact.stiffness "
+                              "or use contact.method = \"ipc\"")
+        return record
 
     def _preserve_volume(self, model) -> None:
         """Project the closed shell back onto its rest volume (positions only, along the vertex
@@ -693,6 +715,14 @@ def _estimate(model):
 
 class _Stop(Exception):
     """The health monitor's verdict inside the step loop (becomes RunStopped with the summary)."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+
+class _Invalid(Exception):
+    """A state the run must not go on from (contact: intersecting surfaces): becomes RunStopped "invalid"."""
 
     def __init__(self, message: str):
         super().__init__(message)

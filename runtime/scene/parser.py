@@ -30,7 +30,7 @@ def _event_step(time: float, solver) -> int:
     return max(1, math.ceil(time / float(solver.dt) - 1e-9))
 
 _TOP = ("name", "description", "mesh", "material", "fixed", "loads", "solver", "probe", "output", "adapt",
-        "amplitude", "cut", "remove", "refine")
+        "amplitude", "cut", "remove", "refine", "contact", "obstacle")
 _CUT = ("time", "step", "plane", "box", "name", "criterion", "threshold", "every", "sweep", "duration")
 TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
@@ -91,7 +91,8 @@ class Parser(ValueParser):
             raise SceneError(f"fixed[{dup}].name: duplicate reaction name {reaction_names[dup]!r} "
                              f"(fixed[{reaction_names.index(reaction_names[dup])}] has it too)")
         loads = self.loads(self.table(data.get("loads", {}), "loads"))
-        amplitudes = self.amplitudes(data.get("amplitude", []), fixed, loads)
+        contact, obstacles = self.contact(data)
+        amplitudes = self.amplitudes(data.get("amplitude", []), fixed, loads, obstacles)
         solver = self.solver(self.table(data.get("solver", {}), "solver"))
         probes = [self.probe(t, f"probe[{i}]", i) for i, t in enumerate(self.tables(data.get("probe", []), "probe"))]
         names = [p.name for p in probes]
@@ -117,9 +118,29 @@ class Parser(ValueParser):
         if topology and adapt:
             raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
                              "rules yet")
+        if (contact is not None or obstacles) and (topology or any(a.action == "refine" for a in adapt)):
+            what = f"[[{topology[0].kind}]]" if topology else "[[adapt]] action = \"refine\""
+            raise SceneError(f"contact: cannot be combined with {what} (a contact surface that changes during the "
+                             "run is not supported)")
         return dict(mesh=mesh, materials=materials, fixed=fixed, loads=loads, solver=solver, probes=probes,
                     output=output, adapt=adapt, name=name, description=description, amplitudes=amplitudes,
-                    topology=topology)
+                    topology=topology, contact=contact, obstacles=obstacles)
+
+    def contact(self, data) -> tuple:
+        """[contact] and [[obstacle]] (runtime.contact.scene): (ContactSpec or None, [Obstacle])."""
+        if "contact" not in data and "obstacle" not in data:
+            return None, []
+        from ..contact.base import ContactSpec
+        from ..contact.scene import check_obstacles, parse_contact, parse_obstacle
+        spec = parse_contact(self, data["contact"]) if "contact" in data else ContactSpec()
+        obstacles = [parse_obstacle(self, t, f"obstacle[{i}]") for i, t in enumerate(self.tables(data.get("obstacle", []), "obstacle"))]
+        check_obstacles(obstacles)
+        if not obstacles and not (spec.self_contact or spec.bodies):
+            raise SceneError("contact: nothing can touch (no [[obstacle]], self = false and bodies = false)")
+        if spec.method == "penalty" and not obstacles:
+            raise SceneError("contact.method = \"penalty\": penalty contact acts between the body and [[obstacle]]s; "
+                             "give an obstacle, or use method = \"ipc\" for bodies and self-contact")
+        return spec, obstacles
 
     def mesh(self, t) -> MeshSpec:
         self.keys(t, "mesh", _MESH)
@@ -392,14 +413,14 @@ class Parser(ValueParser):
             raise SceneError(f"{key}.displacement: not with rotation/translation (a rigid motion); "
                              "give the displacement as translation = [...]")
 
-    def amplitudes(self, raw, fixed, loads) -> list:
+    def amplitudes(self, raw, fixed, loads, obstacles=()) -> list:
         """[[amplitude]] tables; every name used exists and every table is used."""
         amps = [parse_amplitude(self, t, f"amplitude[{i}]") for i, t in enumerate(self.tables(raw, "amplitude"))]
         names = [a.name for a in amps]
         dup = next((n for n in names if names.count(n) > 1), None)
         if dup is not None:
             raise SceneError(f"amplitude[{names.index(dup, names.index(dup) + 1)}].name: duplicate amplitude name {dup!r}")
-        check_amplitude_use(amps, fixed, loads)
+        check_amplitude_use(amps, fixed, loads, obstacles)
         return amps
 
     def loads(self, t) -> Loads:

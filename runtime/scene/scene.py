@@ -113,6 +113,8 @@ class Scene:
     max_memory: int | str | None = None   # memory limit (bytes or "8G"); None: see runtime.scene.resources
     amplitudes: list = field(default_factory=list)  # [Amplitude] (runtime.physics.motion)
     topology: list = field(default_factory=list)    # [TopologyEvent]: [[cut]] and [[remove]] in time order
+    contact: object = None                          # runtime.contact.base.ContactSpec ([contact]) or None
+    obstacles: list = field(default_factory=list)   # [runtime.contact.obstacles.Obstacle] ([[obstacle]])
 
     # -- reading ------------------------------------------------------------------------------
     @classmethod

@@ -550,6 +550,7 @@ class ConstrainedSystem:
         self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
         self._fc = None                  # free/fixed block: built on first use (moving constraints only)
+        self._seen = None                # every free/free entry an extra matrix (contact) has had so far
 
     def structure(self):
         """The matrix solve() hands the linear solver, with unit values (its choice of method reads
@@ -571,19 +572,45 @@ class ConstrainedSystem:
         entries, indices, indptr, shape = block
         return sp.csr_matrix((data[entries], indices, indptr), shape=shape)
 
-    def solve(self, solver: LinearSolver, data: np.ndarray, b: np.ndarray, x_c=None, x0=None):
-        """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations)."""
+    def solve(self, solver: LinearSolver, data: np.ndarray, b: np.ndarray, x_c=None, x0=None, extra=None):
+        """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations).
+
+        extra: None, or an (n_dofs x n_dofs) sparse matrix added to A (contact: pairs of nodes the
+        mesh does not couple).  The matrix handed to the solver keeps every entry extra has ever had
+        (explicit zeros where a pair has let go), so its pattern, and the solver's analysis of it,
+        change only when a new pair appears."""
         if self.hanging is not None:
+            if extra is not None:
+                raise ValueError("contact with hanging nodes is not supported")
             return self._solve_constrained(solver, data, b, x_c, x0)
         x = np.zeros(self.pattern.n_dofs)
         rhs = b[self.free]
-        if x_c is not None and self.fixed.size and np.any(x_c):
+        moving = x_c is not None and self.fixed.size and np.any(x_c)
+        if moving:
             x[self.fixed] = x_c
             rhs = rhs - self._block(data, self.fc) @ x_c
+        A = self._block(data, self.ff)
+        if extra is not None:
+            extra = sp.csr_matrix(extra)
+            if moving:
+                rhs = rhs - extra[self.free][:, self.fixed] @ x_c
+            A = self._with_extra(A, extra[self.free][:, self.free])
         guess = None if x0 is None else x0[self.free]
         solver.near_nullspace = self.modes
-        x[self.free], its = solver.solve(self._block(data, self.ff), rhs, guess)
+        x[self.free], its = solver.solve(A, rhs, guess)
         return x, its
+
+    def _with_extra(self, A, E):
+        """A + E on the union of A's pattern and every pattern E has had (see solve)."""
+        E = E.tocoo()
+        seen = sp.csr_matrix((np.ones(E.nnz), (E.row, E.col)), shape=A.shape)
+        self._seen = seen if self._seen is None else (self._seen + seen)
+        A, Z = A.tocoo(), self._seen.tocoo()
+        out = sp.coo_matrix((np.concatenate([A.data, E.data, np.zeros(Z.nnz)]),
+                             (np.concatenate([A.row, E.row, Z.row]), np.concatenate([A.col, E.col, Z.col]))),
+                            shape=A.shape).tocsr()
+        out.sort_indices()
+        return out
 
     def _solve_constrained(self, solver, data, b, x_c, x0):
         """The hanging-node constrained system: P^T A P, P^T b on the free dofs, then x = P x."""

@@ -1,0 +1,144 @@
+"""What IPC and penalty contact share: the [contact] settings, obstacle poses, records per step.
+
+    contact = build_contact(model)       # None when the scene has no [contact] / [[obstacle]]
+    contact.begin_step(u, s0, s1, h)     # the step from run fraction s0 to s1 (h: its length; statics 1)
+    contact.energy(u); contact.gradient(u); contact.hessian(u, project)   # terms of the potential
+    contact.max_step(u, d)               # largest a <= 1 with u + a d free of intersections (IPC)
+    contact.record(u)                    # the step's row: pairs, minimum distance, forces on obstacles
+
+Integrators take contact through runtime.physics.newton's Potential (energy, gradient, the Hessian
+as an extra sparse matrix, the line search's step limit) and through contact_solve (the obstacles'
+motion within a step and friction's lagging iterations).  Which integrator takes which method:
+METHODS_OF.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..base.errors import TensormassError
+
+__all__ = ["ContactSpec", "METHODS", "METHODS_OF", "ContactBase", "build_contact", "check_integrator"]
+
+METHODS = ("ipc", "penalty")
+# solver kind -> the contact methods it takes.  IPC needs a solve that can cap its step by CCD:
+# Newton on an incremental potential (static, backward Euler) or the one linear solve of implicit
+# Euler (capped after the solve).  Explicit steps are not solves: penalty forces only; the
+# generalized-alpha state y mixes two times, so a barrier on y does not keep u_{n+1} apart.
+METHODS_OF = {"static": ("ipc", "penalty"), "backward_euler": ("ipc", "penalty"),
+              "implicit_euler": ("ipc", "penalty"), "explicit": ("penalty",),
+              "generalized_alpha": ("penalty",)}
+
+
+@dataclass
+class ContactSpec:
+    """The [contact] table."""
+    method: str = "ipc"
+    dhat: float | None = None             # barrier activation distance [m]; None: dhat_relative x body diagonal
+    dhat_relative: float = 1e-3
+    stiffness: float | None = None        # IPC: barrier stiffness (None: adaptive); penalty: N/m per vertex
+    mu: float = 0.0                       # friction coefficient (IPC)
+    friction_iterations: int = 2          # lagging iterations of the friction's normal forces and bases
+    eps_v: float | None = None            # friction's smoothing velocity [m/s]; None: 1e-3 x body diagonal / s
+    self_contact: bool = False            # a body against itself
+    bodies: bool = True                   # distinct bodies of the mesh against each other
+    check_every: int = 1                  # IPC: intersection test of the contact surfaces every this many steps
+    max_penetration: float | None = None  # penalty: warn above this [m]; None: 1e-3 x body diagonal
+    given: tuple = field(default_factory=tuple)   # the keys the scene gave (for messages)
+
+
+def check_integrator(kind: str, method: str) -> None:
+    takes = METHODS_OF.get(kind, ())
+    if method not in takes:
+        other = [k for k, ms in METHODS_OF.items() if method in ms]
+        raise TensormassError(f"contact.method = {method!r} does not work with solver.kind = {kind!r} "
+                              f"(it takes {', '.join(repr(m) for m in takes) or 'no contact'}); "
+                              f"{method!r} runs with {', '.join(other)}")
+
+
+class ContactBase:
+    """Poses of the obstacles over the run, the dof map of the surface and the step's record."""
+    method = ""
+
+    def __init__(self, model, spec: ContactSpec, obstacles, surface):
+        self.model, self.spec, self.obstacles, self.surface = model, spec, list(obstacles), surface
+        dpn = model.dofs_per_node
+        self.dofs = (surface.nodes[:, None] * dpn + np.arange(3)).ravel()
+        self.n_dofs = model.n_dofs
+        self.X = np.asarray(model.mesh.points, dtype=float)[surface.nodes]
+        lo, hi = model.mesh.points.min(axis=0), model.mesh.points.max(axis=0)
+        self.diagonal = float(np.linalg.norm(hi - lo))
+        self.s = 0.0                       # run fraction of the obstacles' current pose
+        self.h = 1.0
+        self.step_ccd = 1.0                # smallest step fraction CCD allowed this step
+        self.forces_now = None
+
+    # -- poses -------------------------------------------------------------------------------------
+    def amplitude(self, obstacle, s: float) -> float:
+        return self.model.motion.factor(obstacle.amplitude, s)
+
+    def body_points(self, u: np.ndarray) -> np.ndarray:
+        return self.X + u[self.dofs].reshape(-1, 3)
+
+    def set_pose(self, s: float) -> None:
+        self.s = float(s)
+
+    # -- a step ------------------------------------------------------------------------------------
+    def begin_step(self, u, s0: float, s1: float, h: float) -> None:
+        self.h = float(h)
+        self.step_ccd = 1.0
+
+    def scatter(self, g_body: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.n_dofs)
+        out[self.dofs] = g_body
+        return out
+
+    def to_global(self, H) -> sp.csr_matrix:
+        """A (3m x 3m) matrix over the surface's vertices as an (n_dofs x n_dofs) matrix."""
+        H = H.tocoo()
+        return sp.csr_matrix((H.data, (self.dofs[H.row], self.dofs[H.col])), shape=(self.n_dofs, self.n_dofs))
+
+    def max_step(self, u, d) -> float:
+        return 1.0
+
+    # the obstacles' move inside Newton (IPC overrides these; penalty places them at once)
+    def pose_moving(self) -> bool:
+        return False
+
+    def try_pose(self, a: float) -> None:
+        pass
+
+    def accept_pose(self, a: float) -> None:
+        pass
+
+    def pose_load(self, u):
+        return None
+
+    def intersecting(self, u) -> str | None:
+        return None
+
+    def nodal_forces(self, u) -> np.ndarray:
+        """(n_points, 3): the force the contact exerts on each node (zero off the surface)."""
+        f = np.zeros((self.model.n_points, 3))
+        f[self.surface.nodes] = -self.gradient(u)[self.dofs].reshape(-1, 3)
+        return f
+
+
+def build_contact(model):
+    """The contact of a model's scene (runtime.contact.ipc or .penalty), or None without contact."""
+    scene = getattr(model, "scene", None)
+    spec = getattr(scene, "contact", None)
+    obstacles = getattr(scene, "obstacles", None) or []
+    if spec is None and not obstacles:
+        return None
+    spec = spec or ContactSpec()
+    check_integrator(model.solver.kind, spec.method)
+    from .surface import contact_surface
+    surface = contact_surface(model)
+    if spec.method == "penalty":
+        from .penalty import PenaltyContact
+        return PenaltyContact(model, spec, obstacles, surface)
+    from .ipc import IPCContact
+    return IPCContact(model, spec, obstacles, surface)
