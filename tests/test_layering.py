@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"api": "tensormass", "generator": "tensormass.generator", "laws": "tensormass.laws",
            "backends": "tensormass.backends", "generated": "tensormass.generated", "runtime": "tensormass.runtime",
            "apps": "tensormass.apps", "elements": "tensormass.elements"}
-WINGS = ("base", "mesh", "kernels", "assembly", "solve", "physics", "scene", "model", "change", "run")
+WINGS = ("base", "mesh", "kernels", "assembly", "solve", "physics", "contact", "scene", "model", "change", "run")
 
 
 def _modules(root=ROOT) -> dict:

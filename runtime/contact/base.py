@@ -1,6 +1,6 @@
 """What IPC and penalty contact share: the [contact] settings, obstacle poses, records per step.
 
-    contact = build_contact(model)       # None when the scene has no [contact] / [[obstacle]]
+    contact = build_contact(model)       # runtime.contact.build: None without [contact] / [[obstacle]]
     contact.begin_step(u, s0, s1, h)     # the step from run fraction s0 to s1 (h: its length; statics 1)
     contact.energy(u); contact.gradient(u); contact.hessian(u, project)   # terms of the potential
     contact.max_step(u, d)               # largest a <= 1 with u + a d free of intersections (IPC)
@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from ..base.errors import TensormassError
 
-__all__ = ["ContactSpec", "METHODS", "METHODS_OF", "ContactBase", "build_contact", "check_integrator"]
+__all__ = ["ContactSpec", "METHODS", "METHODS_OF", "ContactBase", "check_integrator"]
 
 METHODS = ("ipc", "penalty")
 # solver kind -> the contact methods it takes.  IPC needs a solve that can cap its step by CCD:
@@ -124,21 +124,3 @@ class ContactBase:
         f = np.zeros((self.model.n_points, 3))
         f[self.surface.nodes] = -self.gradient(u)[self.dofs].reshape(-1, 3)
         return f
-
-
-def build_contact(model):
-    """The contact of a model's scene (runtime.contact.ipc or .penalty), or None without contact."""
-    scene = getattr(model, "scene", None)
-    spec = getattr(scene, "contact", None)
-    obstacles = getattr(scene, "obstacles", None) or []
-    if spec is None and not obstacles:
-        return None
-    spec = spec or ContactSpec()
-    check_integrator(model.solver.kind, spec.method)
-    from .surface import contact_surface
-    surface = contact_surface(model)
-    if spec.method == "penalty":
-        from .penalty import PenaltyContact
-        return PenaltyContact(model, spec, obstacles, surface)
-    from .ipc import IPCContact
-    return IPCContact(model, spec, obstacles, surface)

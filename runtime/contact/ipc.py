@@ -11,8 +11,8 @@ PSD-projected Hessian in the Newton matrix (added as a sparse matrix: contact pa
 the mesh does not).  The line search starts from the largest step that continuous collision
 detection (CCD) allows, so no iterate ever intersects.
 
-Barrier stiffness: adaptive by default (ipctk.initial_barrier_stiffness from the gradients at the
-first step and the Newton matrix's mean diagonal on the surface, then
+Barrier stiffness: adaptive by default (IPCContact.start_stiffness: from the Newton matrix's mean
+diagonal on the surface and, for pairs active at the start, IPC's gradient balance; then
 ipctk.update_barrier_stiffness after each step when the distance keeps shrinking), or the
 [contact] stiffness.  Friction (mu > 0): ipctk's smoothed Coulomb friction, lagged: the normal
 forces and tangent bases come from the state at the start of each of friction_iterations solves.
@@ -38,8 +38,8 @@ def import_ipctk():
     try:
         import ipctk
     except ImportError:
-        raise TensormassError("contact.method = \"ipc\" needs the IPC Toolkit: pip install \"tensormass[contact]\" "
-                              "(or pip install ipctk); contact.method = \"penalty\" runs without it") from None
+        raise TensormassError("contact.method = \"ipc\" needs the IPC Toolkit (a dependency of tensormass that is "
+                              "not importable here): pip install ipctk; contact.method = \"penalty\" runs without it") from None
     return ipctk
 
 

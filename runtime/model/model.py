@@ -256,7 +256,7 @@ class Model:
         model.scene = scene
         # [contact] / [[obstacle]] (runtime.contact): refused here, before the first step, when the body
         # starts intersecting an obstacle or the solver does not take the method
-        from ..contact.base import build_contact
+        from ..contact.build import build_contact
         model.contact = build_contact(model)
         return model
 
