@@ -119,6 +119,31 @@ class ContactBase:
     def intersecting(self, u) -> str | None:
         return None
 
+    def note(self, record: dict) -> None:
+        """Keep the run's extremes of the step records (for the summary)."""
+        seen = self.__dict__.setdefault("_extremes", {"steps": 0, "max_pairs": 0, "min_distance": None,
+                                                      "min_ccd_fraction": None, "max_penetration": None})
+        seen["steps"] += 1
+        seen["max_pairs"] = max(seen["max_pairs"], int(record["pairs"]))
+        for key, pick, name in (("min_distance", min, "min_distance"), ("ccd_fraction", min, "min_ccd_fraction"),
+                                ("penetration", max, "max_penetration")):
+            value = record.get(key)
+            if value is not None:
+                seen[name] = value if seen[name] is None else pick(seen[name], value)
+
+    def summary(self) -> dict:
+        """summary["contact"]: the method, its settings as used, the surface and the run's extremes."""
+        out = {"method": self.method, "obstacles": [o.name for o in self.obstacles],
+               "surface": {"vertices": int(self.surface.size), "triangles": int(len(self.surface.triangles)),
+                           "bodies": int(self.surface.n_bodies), "offset": float(self.surface.offset),
+                           "kind": self.surface.kind},
+               **self.settings()}
+        out.update(self.__dict__.get("_extremes", {}))
+        return out
+
+    def settings(self) -> dict:
+        return {}
+
     def nodal_forces(self, u) -> np.ndarray:
         """(n_points, 3): the force the contact exerts on each node (zero off the surface)."""
         f = np.zeros((self.model.n_points, 3))

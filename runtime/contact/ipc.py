@@ -305,6 +305,12 @@ class IPCContact(ContactBase):
         return a
 
     # -- checks and records ---------------------------------------------------------------------------
+    def settings(self) -> dict:
+        return {"dhat": self.dhat, "stiffness": self.kappa, "adaptive_stiffness": self.spec.stiffness is None,
+                "mu": self.spec.mu, "friction_iterations": self.spec.friction_iterations if self.spec.mu > 0 else 0,
+                "eps_v": self.eps_v if self.spec.mu > 0 else None, "self": self.spec.self_contact,
+                "bodies": self.spec.bodies, "check_every": self.spec.check_every}
+
     def intersecting(self, u) -> str | None:
         V = self.vertices(u)
         if self.ipc.has_intersections(self.mesh, V, broad_phase=self.broad):

@@ -104,6 +104,9 @@ class PenaltyContact(ContactBase):
         H = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m))
         return self.to_global(H)
 
+    def settings(self) -> dict:
+        return {"stiffness": self.k, "max_penetration_allowed": self.max_penetration}
+
     def forces(self, u) -> np.ndarray:
         """The penalty forces on every dof (explicit steps)."""
         return -self.gradient(u)

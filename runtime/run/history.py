@@ -18,12 +18,16 @@ The keys (summary["per_step"]; units in summary["units"], see `units`):
     step, time [s] (statics: the load factor), newton, linear (iterations of that step),
     wall [s] (the step's wall time), elastic, kinetic, external_work [J] (None: not evaluated),
     probes {name: [[ux, uy(, uz)], ...]} [m], reactions {name: {"force": [[Fx, Fy(, Fz)], ...] [N],
-    "moment": [[Mx, My, Mz], ...] [N m] (2D: [[Mz], ...])}}, stride.
+    "moment": [[Mx, My, Mz], ...] [N m] (2D: [[Mz], ...])}}, stride; with contact (runtime.contact)
+    also contact {"pairs", "min_distance" [m], "ccd_fraction", "penetration" [m]: [...]} and
+    obstacles {name: {"force": [[Fx, Fy, Fz], ...] [N], "moment": [...] [N m]}}: the force each
+    obstacle receives from the body, its moment about the obstacle's centre.
 
 CSV (write_history_csv): one header line, then one line per kept step; columns step, time [s],
 newton, linear, wall [s], elastic [J], kinetic [J], external_work [J], then per probe
 ``probe.<name>.ux [m]`` (uy, uz), per reaction ``reaction.<name>.Fx [N]`` (Fy, Fz) and
-``reaction.<name>.Mx [N m]`` (My, Mz; 2D: Mz only).  Floats as repr (round-trips exactly),
+``reaction.<name>.Mx [N m]`` (My, Mz; 2D: Mz only), then ``contact.<key>`` and
+``obstacle.<name>.Fx [N]`` .. ``obstacle.<name>.Mz [N m]`` with contact.  Floats as repr (round-trips exactly),
 empty where a value was not evaluated; written atomically.
 """
 from __future__ import annotations

@@ -84,6 +84,7 @@ class Summary:
     fields: dict | None = None            # output fields of the frames: names, units, law_ids (runtime.physics.fields)
     units: dict = field(default_factory=dict)      # unit of every per_step key (runtime.run.history.units)
     advice: list = field(default_factory=list)     # setup-time advice (runtime.scene.advice); never changes status
+    contact: dict | None = None           # runtime.contact: method, settings, surface and the run's extremes
 
     @property
     def exit_code(self) -> int:
@@ -410,6 +411,7 @@ class Simulation:
         """The step's contact record (runtime.contact); IPC: the intersection test every check_every steps
         (a state that intersects is a bug, and the run stops "invalid"); penalty: the penetration warning."""
         record = contact.record(self.ctx.u)
+        contact.note(record)
         if contact.method == "ipc" and k % contact.spec.check_every == 0:
             why = contact.intersecting(self.ctx.u)
             if why is not None:
@@ -629,7 +631,8 @@ class Simulation:
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
             fields=self._fields_summary(), reactions=self._final_reactions(),
-            units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic), advice=list(getattr(self, "advice", [])))
+            units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic), advice=list(getattr(self, "advice", [])),
+            contact=None if getattr(model, "contact", None) is None else model.contact.summary())
 
     def _kernel_info(self) -> list:
         """Model.kernel_info with, per part, the colour count of its assembly: segments of one colour
