@@ -71,6 +71,11 @@ TABLES = (
     Table("cut", True, "Cut or tear the body during the run."),
     Table("remove", True, "Remove cells during the run (resection)."),
     Table("refine", True, "Split hexahedra 1:8 during the run."),
+    Table("contact", False, "Contact of the body with obstacles, between its bodies and with itself: the method and "
+                            "its settings (see Contact)."),
+    Table("obstacle", True, "Rigid, kinematic obstacles the body touches: a plane, sphere, capsule, box or closed "
+                            "triangle mesh, moved by a rigid motion."),
+    Table("obstacle.rotation", False, "An inline table of an [[obstacle]] entry: a rotation about an axis."),
 )
 
 _BOX = "[[x0, y0, z0], [x1, y1, z1]] (2D: two components)"
@@ -108,6 +113,8 @@ KEYS = (
     Key("", "cut", "array of tables", doc="See [[cut]]."),
     Key("", "remove", "array of tables", doc="See [[remove]]."),
     Key("", "refine", "array of tables", doc="See [[refine]]."),
+    Key("", "contact", "table", doc="See [contact]; an [[obstacle]] alone switches contact on with its defaults."),
+    Key("", "obstacle", "array of tables", doc="See [[obstacle]]."),
     # -- [mesh] --------------------------------------------------------------------------------
     Key("mesh", "generate", "string", choices="runtime.scene.parser:GENERATORS",
         doc="A generated mesh: bar (a box of cells), plate or sphere (shell triangles), ball (solid "
@@ -277,6 +284,52 @@ KEYS = (
     *_when("refine"),
     Key("refine", "box", _BOX, REQUIRED, "m", doc="The hexahedra whose rest centroid lies inside are split 1:8."),
     Key("refine", "name", "string", doc="The event's name in the summary."),
+    # -- [contact] -------------------------------------------------------------------------------
+    Key("contact", "method", "string", "ipc", choices="runtime.contact.base:METHODS",
+        doc="ipc (barrier, CCD, friction; no surface ever crosses) or penalty (obstacles only; vertices may "
+            "sink in). Which solver takes which: see Contact."),
+    Key("contact", "dhat", "number", unit="m", default_text="dhat_relative x the body's bounding-box diagonal",
+        doc="IPC: the distance below which the barrier acts."),
+    Key("contact", "dhat_relative", "number", 1e-3, "1", doc="IPC: dhat as a fraction of the body's diagonal."),
+    Key("contact", "stiffness", "number", unit="IPC: Pa m (barrier kappa); penalty: N/m",
+        default_text="IPC: adaptive; penalty: 10 E h (E the largest Young's modulus, h the mean surface edge)",
+        doc="IPC: the barrier stiffness; penalty: the spring per surface vertex."),
+    Key("contact", "mu", "number", 0.0, "1", doc="IPC: Coulomb friction coefficient, >= 0 (0: frictionless)."),
+    Key("contact", "friction_iterations", "integer", 2,
+        doc="IPC friction: solves per step, each with the normal forces and tangents of the last (lagged)."),
+    Key("contact", "eps_v", "number", unit="m/s", default_text="1e-3 x the body's diagonal per second",
+        doc="IPC friction: the slip velocity below which friction is smoothed (static friction's stand-in)."),
+    Key("contact", "self", "boolean", False, doc="IPC: a body against itself (its own surface)."),
+    Key("contact", "bodies", "boolean", True, doc="IPC: distinct connected bodies of the mesh against each other."),
+    Key("contact", "check_every", "integer", 1,
+        doc="IPC: test the surfaces for intersection every this many steps (one found: status invalid)."),
+    Key("contact", "max_penetration", "number", unit="m", default_text="1e-3 x the body's diagonal",
+        doc="Penalty: warn when a vertex sinks deeper than this into an obstacle."),
+    # -- [[obstacle]] ----------------------------------------------------------------------------
+    Key("obstacle", "name", "string", default_text="\"obstacle[i]\"",
+        doc="The obstacle's name in the history (its force and moment); names must differ."),
+    Key("obstacle", "shape", "string", REQUIRED, choices="runtime.contact.obstacles:SHAPES",
+        doc="plane (point, normal), sphere (center, radius), capsule (a, b, radius), box (box), mesh (file)."),
+    Key("obstacle", "point", "array of 3 numbers", unit="m", doc="plane: a point on it."),
+    Key("obstacle", "normal", "array of 3 numbers", doc="plane: the side the body stays on (not zero)."),
+    Key("obstacle", "center", "array of 3 numbers", unit="m", doc="sphere: the centre."),
+    Key("obstacle", "radius", "number", unit="m", doc="sphere, capsule: the radius, > 0."),
+    Key("obstacle", "a", "array of 3 numbers", unit="m", doc="capsule: one end of the segment."),
+    Key("obstacle", "b", "array of 3 numbers", unit="m", doc="capsule: the other end (not a)."),
+    Key("obstacle", "box", "[[x0, y0, z0], [x1, y1, z1]]", unit="m", doc="box: its corners at rest (axis-aligned)."),
+    Key("obstacle", "file", "string (path)",
+        doc="mesh: a closed triangle surface (STL, OBJ, any meshio format), relative to the scene file; IPC only."),
+    Key("obstacle", "scale", "number", 1.0, "1", doc="mesh: multiplies the file's coordinates."),
+    Key("obstacle", "resolution", "number", unit="m", default_text="the body's mean surface edge",
+        doc="sphere, capsule: the largest chord of the IPC tessellation, below the diameter."),
+    Key("obstacle", "translation", "array of 3 numbers", unit="m",
+        doc="A rigid translation at amplitude 1 (with or without rotation)."),
+    Key("obstacle", "rotation", "inline table", doc="A rigid rotation; see [[obstacle]] rotation."),
+    Key("obstacle", "amplitude", "string", default_text="\"ramp\"",
+        doc="The [[amplitude]] (or \"ramp\", \"constant\") scaling the motion; needs translation or rotation."),
+    Key("obstacle.rotation", "axis", "array of 3 numbers", REQUIRED, doc="The axis direction (not zero)."),
+    Key("obstacle.rotation", "point", "array of 3 numbers", REQUIRED, "m", doc="A point on the axis."),
+    Key("obstacle.rotation", "angle", "number", REQUIRED, "degree", doc="The angle at amplitude 1."),
 )
 
 # [[material]] also takes the law's native parameters (mu, lam, C10, ...) and options (A): they

@@ -80,6 +80,19 @@ Schema (every table but [mesh] and [[material]] is optional)::
     [[refine]]                              # split the hexahedra whose rest centroid is in the box 1:8
     time = 0.1                              # (or step = k); hanging nodes are constrained
     box = [[...], [...]]
+    [contact]                               # contact (runtime.contact); an [[obstacle]] alone switches it on
+    method = "ipc"                          # or "penalty" (obstacles only); runtime.contact.base.METHODS_OF: per solver
+    dhat = 1e-3                             # IPC barrier distance [m] (default dhat_relative = 1e-3 x body diagonal)
+    stiffness = 1e4                         # IPC barrier kappa (default adaptive); penalty: N/m per vertex (10 E h)
+    mu = 0.2                                # IPC friction, lagged (friction_iterations = 2, eps_v [m/s])
+    self = false                            # and bodies = true, check_every = 1; penalty: max_penetration [m]
+    [[obstacle]]                            # a rigid, kinematic body (runtime.contact.obstacles); name = "tool"
+    shape = "capsule"                       # plane: point, normal | sphere: center, radius | box: box |
+    a = [0.0, 0.0, 0.1]                     # mesh: file, scale | capsule: a, b, radius
+    b = [0.0, 0.0, 0.2]                     # (sphere, capsule: resolution [m], the tessellation's chord)
+    radius = 0.01
+    translation = [0.0, 0.0, -0.02]         # and/or rotation = {axis, point, angle}, as for [[fixed]];
+    amplitude = "press"                     # default: the ramp over the run
 
 Boxes are closed and inclusive, with a tolerance of 1e-8 of the mesh's bounding
 box diagonal; their bounds may be +-inf (TOML ``inf``), never NaN.

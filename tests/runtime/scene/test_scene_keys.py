@@ -13,6 +13,8 @@ import re
 import pytest
 
 from tensormass import laws
+from tensormass.runtime.contact.base import ContactSpec
+from tensormass.runtime.contact.obstacles import Obstacle
 from tensormass.runtime.scene import types as scene_module
 from tensormass.runtime.base.errors import SceneError
 from tensormass.runtime.scene.scene import Scene
@@ -35,6 +37,10 @@ BASE = {
     "remove": [{"step": 1, "box": BOX}],
     "refine": [{"step": 1, "box": BOX}],
 }
+# contact may not be combined with [[cut]], [[remove]], [[refine]]: its tables are asked on their own
+CONTACT = {"contact": {"method": "ipc"},
+           "obstacle": [{"shape": "plane", "point": [0, 0, 0], "normal": [0, 0, 1.0], "translation": [0, 0, 0.01],
+                         "rotation": {"axis": [1.0, 0, 0], "point": [0, 0, 0], "angle": 1.0}}]}
 
 
 def _allowed_by_parser(table: str) -> list:
@@ -44,6 +50,10 @@ def _allowed_by_parser(table: str) -> list:
         for other in ("cut", "remove", "refine", "adapt"):
             if other != table:
                 data.pop(other)
+    if table.split(".")[0] in ("contact", "obstacle"):
+        for other in ("cut", "remove", "refine"):
+            data.pop(other)
+        data.update(copy.deepcopy(CONTACT))
     node = data
     for part in table.split(".") if table else ():
         node = node[part]
@@ -71,12 +81,13 @@ def test_declared_keys_are_the_parsers(table):
 _DATACLASSES = {"mesh": scene_module.MeshSpec, "material": scene_module.Material, "fixed": scene_module.Fixed,
                 "solver": scene_module.Solver, "probe": scene_module.Probe, "output": scene_module.Output,
                 "adapt": scene_module.Adapt, "cut": scene_module.TopologyEvent,
-                "remove": scene_module.TopologyEvent, "refine": scene_module.TopologyEvent}
-_FIELD_NAMES = {("adapt", "from"): "from_law"}
+                "remove": scene_module.TopologyEvent, "refine": scene_module.TopologyEvent,
+                "contact": ContactSpec, "obstacle": Obstacle}
+_FIELD_NAMES = {("adapt", "from"): "from_law", ("contact", "self"): "self_contact"}
 
 
 def test_declared_defaults_are_the_parsers():
-    checked = 0
+    checked, tables = 0, set()
     for key in KEYS:
         cls = _DATACLASSES.get(key.table)
         if cls is None or key.default_text is not None or key.default == REQUIRED:
@@ -88,7 +99,9 @@ def test_declared_defaults_are_the_parsers():
         expected = None if key.default == NO_DEFAULT else key.default
         assert fields[name].default == expected, f"{key.table}.{key.name}: {key.default!r} vs {fields[name].default!r}"
         checked += 1
+        tables.add(key.table)
     assert checked >= 30
+    assert {"contact", "obstacle"} <= tables      # their defaults live in ContactSpec and Obstacle
 
 
 def test_allowed_values_resolve_and_are_accepted():
