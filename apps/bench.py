@@ -44,6 +44,7 @@ from .bench_organ import add_organ_command
 from .bench_springs import add_springs_command
 from .bench_shells import add_shells_command
 from .bench_cutting import add_cutting_command
+from .bench_contact import add_contact_command
 from .bench_batch import add_batch_command
 from .bench_steps import add_steps_command
 from .classic import LAWS, load_classic
@@ -532,6 +533,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_springs_command(sub)
     add_shells_command(sub)
     add_cutting_command(sub)
+    add_contact_command(sub)
     add_batch_command(sub)
     return bench
 
