@@ -45,15 +45,17 @@ _CONTACT_KEYS = ("pairs", "min_distance", "ccd_fraction", "penetration")
 _COMPONENTS = ("x", "y", "z")
 
 
-def units(dim: int = 3, static: bool = False) -> dict:
-    """summary["units"]: the unit of every per_step key (2D: per unit thickness)."""
+def units(dim: int = 3, static: bool = False, contact: bool = False) -> dict:
+    """summary["units"]: the unit of every per_step key (2D: per unit thickness; contact: its keys too)."""
     thick = "" if dim == 3 else "/m"
     energy = f"J{thick}"
-    return {"step": "1", "time": "1" if static else "s", "newton": "1", "linear": "1", "wall": "s",
-            "elastic": energy, "kinetic": energy, "external_work": energy, "probes": "m",
-            "reactions.force": f"N{thick}", "reactions.moment": f"N m{thick}",
-            "contact.pairs": "1", "contact.min_distance": "m", "contact.ccd_fraction": "1",
-            "contact.penetration": "m", "obstacles.force": "N", "obstacles.moment": "N m"}
+    out = {"step": "1", "time": "1" if static else "s", "newton": "1", "linear": "1", "wall": "s",
+           "elastic": energy, "kinetic": energy, "external_work": energy, "probes": "m",
+           "reactions.force": f"N{thick}", "reactions.moment": f"N m{thick}"}
+    if contact:
+        out.update({"contact.pairs": "1", "contact.min_distance": "m", "contact.ccd_fraction": "1",
+                    "contact.penetration": "m", "obstacles.force": "N", "obstacles.moment": "N m"})
+    return out
 
 
 class History:

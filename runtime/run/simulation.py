@@ -631,7 +631,8 @@ class Simulation:
             health=self.monitor.summary(), steps_done=self._step,
             estimate=_estimate(model), probe_points=model.probe_info(),
             fields=self._fields_summary(), reactions=self._final_reactions(),
-            units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic), advice=list(getattr(self, "advice", [])),
+            units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic,
+                         getattr(model, "contact", None) is not None), advice=list(getattr(self, "advice", [])),
             contact=None if getattr(model, "contact", None) is None else model.contact.summary())
 
     def _kernel_info(self) -> list:

@@ -311,7 +311,7 @@ def test_unknown_amplitude_names_list_the_known_ones_and_unused_tables_are_refus
     data = dict(bar(), loads={"gravity": [0, 0, -1.0], "gravity_amplitude": "x"})
     assert "loads.gravity_amplitude: unknown amplitude 'x'" in _scene_error(data)
     data = dict(bar(), amplitude=[{"name": "press", "time": [0.0, 1.0], "value": [0, 1]}])
-    assert "amplitude[0]: 'press' is used by no [[fixed]] entry or load" in _scene_error(data)
+    assert "amplitude[0]: 'press' is used by no [[fixed]] entry, load or obstacle" in _scene_error(data)
     data = dict(bar(amplitude="a"), amplitude=[{"name": "a", "time": [0.0, 1.0], "value": [0, 1]},
                                                {"name": "a", "time": [0.0, 1.0], "value": [0, 2]}])
     assert "amplitude[1].name: duplicate amplitude name 'a'" in _scene_error(data)
