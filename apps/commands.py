@@ -293,6 +293,27 @@ def _health_rows(health) -> list:
                        f"{_fmt_seconds(health.get('time'))} checking")]
 
 
+def _contact_rows(contact, per_step) -> list:
+    """What the contact did (runtime.contact): pairs, closest approach, the last force on each obstacle."""
+    if not contact:
+        return []
+
+    def num(value, fmt):
+        return format(value, fmt) if isinstance(value, (int, float)) else "n/a"
+    if contact["method"] == "ipc":
+        how = (f"ipc, up to {contact.get('max_pairs', 0)} pair(s), closest {num(contact.get('min_distance'), '.3g')} m "
+               f"(dhat {num(contact.get('dhat'), '.3g')} m), smallest CCD step {num(contact.get('min_ccd_fraction'), '.3g')}")
+    else:
+        how = (f"penalty, up to {contact.get('max_pairs', 0)} vertex(es) inside, deepest "
+               f"{num(contact.get('max_penetration'), '.3g')} m")
+    rows = [("contact", how)]
+    for name, parts in (per_step.get("obstacles") or {}).items():
+        forces = [f for f in parts.get("force", []) if f is not None]
+        if forces:
+            rows.append((f"obstacle {name}", "F = [" + ", ".join(format(x, ".4g") for x in forces[-1]) + "] N (last step)"))
+    return rows
+
+
 # At most this many warnings are listed on the terminal (all of them are in the summary JSON).
 _WARNINGS_SHOWN = 5
 
@@ -362,6 +383,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     if isinstance(est, dict) and est.get("text"):
         rows.append(("estimate", f"{est['text']} (before the run)"))
     rows += _health_rows(data.get("health"))
+    rows += _contact_rows(data.get("contact"), data.get("per_step") or {})
     rows += _warning_rows(data.get("warnings"), json_path)
     rows += _adapt_rows(data.get("adapt"))
     rows += _topology_rows(data.get("topology"))
