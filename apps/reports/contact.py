@@ -33,6 +33,15 @@ velocity, summed per component) stays at its initial value (zero) to round-off: 
 1e-10 of one body's momentum m V, far above double rounding (1e-16) and far below what a
 missing reaction would give (order 1).  The bodies separate: the facing faces' gap is positive
 at the end and the mean velocities point apart.
+
+**What was measured** (full run, 12 s): slide a = 3.2062 against 3.2059 m/s^2 (+0.01 %); stick
+creep 5.864e-4 against 5.814e-4 m/s (x_end 0.2 mm); impact momentum drift 6.3e-12 m V, end gap
++0.053 m, velocities -+0.229 m/s; Hertz (n = 12, delta = 0.02 R): radius 0.1484 against 0.1414 m
+(+4.9 %), force 477 against 414 N (+15 %: outside the 5 % bound, the command exits 1).  The force's
+excess shrinks slowly with the mesh (n = 8: -8 %, one loaded node; n = 12: +15.1 %; n = 16: +14.0 %;
+n = 16 graded towards the pole: +15.1 %; delta = 0.05 R at n = 12: +14.4 %; dhat 1e-5 to 1e-3: +15.1
+to +16.3 %), as linear tetrahedra's excess stiffness does; the material itself checks (uniaxial
+tetra hooke: the exact E).
 """
 from __future__ import annotations
 
