@@ -69,7 +69,7 @@ class IPCContact(ContactBase):
         V0 = np.vstack([self.X] + self.rest) if self.rest else self.X.copy()
         self.mesh = ipc.CollisionMesh(np.asfortranarray(V0), ipc.edges(F), F)
         self.n_body = nb
-        self.mesh.can_collide = self._filter(ipc, surface, spec)
+        self.mesh.can_collide = self._filter(ipc, surface, spec, self.mesh.num_vertices)
         self.dhat = float(spec.dhat) if spec.dhat is not None else spec.dhat_relative * self.diagonal
         self.dmin = float(surface.offset)
         self.kappa = None if spec.stiffness is None else float(spec.stiffness)
@@ -92,7 +92,7 @@ class IPCContact(ContactBase):
         self.check_rest()
 
     @staticmethod
-    def _filter(ipc, surface, spec):
+    def _filter(ipc, surface, spec, n_vertices):
         nb = surface.size
         if spec.self_contact:
             patch = np.arange(nb)                          # every pair of the body may touch
@@ -100,6 +100,9 @@ class IPCContact(ContactBase):
             patch = surface.body.copy()                    # pairs of distinct bodies only
         else:
             patch = np.zeros(nb, dtype=np.int64)           # no pair of the mesh: obstacles only
+        # a label for every vertex of the collision mesh (the filter reads one per vertex): the obstacles'
+        # own one, so they touch every body; the static filter keeps obstacles off each other
+        patch = np.concatenate([patch, np.full(n_vertices - nb, -1)])
         return ipc.make_vertex_patches_filter(np.asarray(patch, dtype=np.int32)) & ipc.make_static_obstacle_filter(nb)
 
     # -- geometry ----------------------------------------------------------------------------------
