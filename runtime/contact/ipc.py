@@ -88,6 +88,7 @@ class IPCContact(ContactBase):
         # 1e7 iterations on a plane pressed flat on a face (parallel edges), 25 s for one step of 27 nodes
         self.ccd = ipc.AdditiveCCD()
         self.target = None                   # the pose the obstacles move to within this step's Newton
+        self.moves = any(o.moves for o in obstacles)
         self._coupling = None                # body x obstacle block of the last Hessian
         self.check_rest()
 
@@ -231,7 +232,7 @@ class IPCContact(ContactBase):
 
     # -- the obstacles' move within Newton: a prescribed motion like that of fixed dofs ----------------
     def pose_moving(self) -> bool:
-        return self.target is not None and self.s != self.target
+        return self.target is not None and self.s != self.target and self.moves
 
     def try_pose(self, a: float) -> None:
         """Obstacles at the share a of the remaining move (a line-search trial)."""

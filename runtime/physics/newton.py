@@ -91,9 +91,12 @@ class Context:
             self._cell_size = h
         return self._cell_size
 
-    def roundoff_floor(self, data) -> float:
-        """The residual round-off leaves after a solve with the Newton matrix `data` (see _FLOOR)."""
+    def roundoff_floor(self, data, extra=None) -> float:
+        """The residual round-off leaves after a solve with the Newton matrix `data` (see _FLOOR); extra:
+        a matrix added beside it (contact: a stiff barrier's forces carry round-off of their own)."""
         K = self.asm.pattern.matrix(np.abs(data))
+        if extra is not None:
+            K = K + abs(extra)
         free = self.model.free_dofs
         return _FLOOR * np.finfo(float).eps * safe_norm((K @ self.cell_size())[free])
 
@@ -396,7 +399,7 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
                 project = True
                 continue
             raise
-        floor = ctx.roundoff_floor(data)
+        floor = ctx.roundoff_floor(data, extra)
         ctx.newton_iterations += 1
         slope = float(g @ d)
         if not moving and slope >= 0.0:
@@ -437,8 +440,11 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
             anchor["count"] += 1
             if Pi <= anchor["Pi"] + _ARMIJO * anchor["slope"] + _ROUNDOFF * max(mag, anchor["mag"]):
                 anchor = None                       # the energy fell below the certified point: go on
-        if fallback and project and full and ctx.project is None and safe_norm(g[free]) <= 0.1 * res:
-            project = False                         # in the basin: back to the exact Hessian
+        if fallback and project and ctx.project is None and (
+                (full and safe_norm(g[free]) <= 0.1 * res) or potential.contact is not None):
+            # in the basin: back to the exact Hessian.  With contact at once: projected barrier pairs
+            # (edge-edge, point-edge curvature clamped) leave Newton converging only linearly
+            project = False
             if mixed is not None:
                 mixed.reset(u)
         if tiny and not np.any(target_c - u[fixed]) and not potential.moving_obstacles():
