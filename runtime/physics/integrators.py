@@ -147,7 +147,7 @@ class ImplicitEuler(_Dynamic):
             f += self.model.pressure.forces(u)
             self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
         contact, extra = self.model.contact, None
-        if contact is not None:             # runtime.contact: linearised like the elastic forces
+        if contact is not None:             # penalty contact, linearised like the elastic forces
             f, extra = self._contact_terms(contact, u, t, h, f)
         dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
         # CG starts from the previous step's dv: consecutive steps change v alike
@@ -158,39 +158,18 @@ class ImplicitEuler(_Dynamic):
         if extra is not None:
             residual = residual + extra @ dv / h
         v1 = v + dv
-        if contact is not None and contact.method == "ipc":
-            # the one linear solve knows the barrier only to first order: cap the motion by CCD (the
-            # velocity keeps the share of the step taken; the rest is lost, as in an inelastic impact)
-            cap = contact.max_step(u, h * v1)
-            if cap < 1.0 and contact.pose_moving():
-                raise TensormassError(f"implicit_euler: the linearised step to time {t + h:.6g} would pass an "
-                                      "obstacle moving into the body; backward_euler takes such steps (or a smaller dt)")
-            if cap < 1.0:
-                v1[self.model.free_dofs] *= cap
-            contact.accept_pose(1.0)
         u1 = u + h * v1
-        if contact is not None:
-            contact.end_step(u1)
         # the step's equation, A dv / h - (f - h K v) = 0, on every dof: its fixed rows are the reactions
         ctx.residual = (u1, ctx.reduce(residual))
         return u1, v1
 
     def _contact_terms(self, contact, u, t, h, f):
-        """The contact's forces (with, for IPC, the obstacles' move over the step to first order) and
-        h^2 x its Hessian at u."""
-        s0, s1 = t / self.duration, (t + h) / self.duration
-        contact.begin_step(u, s0, s1, h)
-        if contact.method == "ipc":
-            contact.start_stiffness(Potential(self.ctx.asm, f), u)
-            contact.lag_friction(u)
-        else:
-            contact.set_pose(s1)
+        """Penalty contact's forces and h^2 x its Hessian at u, the obstacles at the step's end
+        (implicit Euler takes penalty contact only: runtime.contact.base.METHODS_OF)."""
+        contact.begin_step(u, t / self.duration, (t + h) / self.duration, h)
+        contact.set_pose((t + h) / self.duration)
         H = contact.hessian(u, True)
-        f = f - contact.gradient(u)
-        pushed = contact.pose_load(u)
-        if pushed is not None:
-            f = f - pushed
-        return f, None if H is None else h * h * H
+        return f - contact.gradient(u), None if H is None else h * h * H
 
 
 class BackwardEuler(_Dynamic):
