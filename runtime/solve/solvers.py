@@ -591,26 +591,48 @@ class ConstrainedSystem:
             rhs = rhs - self._block(data, self.fc) @ x_c
         A = self._block(data, self.ff)
         if extra is not None:
-            extra = sp.csr_matrix(extra)
+            E = sp.coo_matrix(extra)
+            where = self._free_index()
+            r, c = where[E.row], where[E.col]
             if moving:
-                rhs = rhs - extra[self.free][:, self.fixed] @ x_c
-            A = self._with_extra(A, extra[self.free][:, self.free])
+                ext = (r >= 0) & (c < 0)
+                rhs = rhs - np.bincount(r[ext], weights=E.data[ext] * x_c[-c[ext] - 1], minlength=self.free.size)
+            inner = (r >= 0) & (c >= 0)
+            A = self._with_extra(A, r[inner], c[inner], E.data[inner])
         guess = None if x0 is None else x0[self.free]
         solver.near_nullspace = self.modes
         x[self.free], its = solver.solve(A, rhs, guess)
         return x, its
 
-    def _with_extra(self, A, E):
-        """A + E on the union of A's pattern and every pattern E has had (see solve)."""
-        E = E.tocoo()
-        seen = sp.csr_matrix((np.ones(E.nnz), (E.row, E.col)), shape=A.shape)
-        self._seen = seen if self._seen is None else (self._seen + seen)
-        A, Z = A.tocoo(), self._seen.tocoo()
-        out = sp.coo_matrix((np.concatenate([A.data, E.data, np.zeros(Z.nnz)]),
-                             (np.concatenate([A.row, E.row, Z.row]), np.concatenate([A.col, E.col, Z.col]))),
-                            shape=A.shape).tocsr()
-        out.sort_indices()
-        return out
+    def _free_index(self) -> np.ndarray:
+        """Per dof: its index among the free dofs, or -1 - its index among the fixed ones."""
+        if getattr(self, "_where", None) is None:
+            where = np.empty(self.pattern.n_dofs, dtype=np.int64)
+            where[self.free] = np.arange(self.free.size)
+            where[self.fixed] = -1 - np.arange(self.fixed.size)
+            self._where = where
+        return self._where
+
+    def _with_extra(self, A, rows, cols, values):
+        """A + E on the union of A's pattern and every entry E has had (see solve).  The union's
+        index arrays are kept and reused, so the solver sees the same pattern object (and keeps its
+        analysis) until a new pair appears; only the values are scattered each time."""
+        n = A.shape[0]
+        keys = rows * n + cols
+        union = self._seen
+        if union is None or not np.all(np.isin(keys, union["keys"])):
+            base = A.tocoo()
+            old = np.zeros(0, dtype=np.int64) if union is None else union["extra_keys"]
+            extra_keys = np.union1d(old, keys)
+            all_keys = np.union1d(base.row.astype(np.int64) * n + base.col, extra_keys)
+            indptr = np.searchsorted(all_keys, np.arange(n + 1, dtype=np.int64) * n).astype(A.indptr.dtype)
+            union = self._seen = {"keys": extra_keys, "extra_keys": extra_keys, "all": all_keys,
+                                  "indptr": indptr, "indices": (all_keys % n).astype(A.indices.dtype),
+                                  "base": np.searchsorted(all_keys, base.row.astype(np.int64) * n + base.col)}
+        data = np.zeros(union["all"].size)
+        data[union["base"]] = A.data           # tocoo keeps the data's order
+        np.add.at(data, np.searchsorted(union["all"], keys), values)
+        return sp.csr_matrix((data, union["indices"], union["indptr"]), shape=A.shape)
 
     def _solve_constrained(self, solver, data, b, x_c, x0):
         """The hanging-node constrained system: P^T A P, P^T b on the free dofs, then x = P x."""
