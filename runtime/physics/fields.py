@@ -106,7 +106,7 @@ DEFAULT_FIELDS = ("von_mises", "cauchy_stress", "det_F_min")
 CHUNK = 1024
 
 # Fields another module computes: name -> what provides it.
-PROVIDED = {"reaction": "runtime.physics.reactions"}
+PROVIDED = {"reaction": "runtime.physics.reactions", "contact_force": "runtime.contact ([contact] or [[obstacle]])"}
 
 
 def split_name(entry: str) -> tuple:
