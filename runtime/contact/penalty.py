@@ -104,6 +104,13 @@ class PenaltyContact(ContactBase):
         H = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m))
         return self.to_global(H)
 
+    def stable_time_step(self) -> float:
+        """2 sqrt(m / k): the explicit step above which the lightest surface node bouncing on its
+        penalty spring alone is unstable (the elastic estimate at rest does not see these springs)."""
+        m = np.asarray(self.model.mass, dtype=float)[self.dofs]
+        m = m[m > 0]
+        return 2.0 * float(np.sqrt(m.min() / self.k)) if m.size else np.inf
+
     def settings(self) -> dict:
         return {"stiffness": self.k, "max_penetration_allowed": self.max_penetration}
 

@@ -272,7 +272,7 @@ class Simulation:
         if self._v0 is not None:
             ctx.v = self._v0.copy()
         if isinstance(self.integrator, Explicit):
-            self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
+            self.stable_dt = self.integrator.stable_dt = self._explicit_stable_dt(ctx)
         self.monitor = HealthMonitor(ctx, dynamic=integrator_kinds.get(model.solver.kind).dynamic,
                                      duration=getattr(self.integrator, "duration", None))
         _hourglass.check_static(ctx)          # refused: a static stiffness made singular by hourglass modes
@@ -281,6 +281,12 @@ class Simulation:
         for check in self._checks:           # the pictures asked for can be drawn: refused before step 1
             check(self)
         ctx.asm.time = ctx.linear.time = 0.0         # stepping costs only from here on
+
+    def _explicit_stable_dt(self, ctx) -> float:
+        """2 / omega_max at rest, and below the penalty contact's springs' own limit (runtime.contact)."""
+        dt = stable_time_step(ctx)
+        contact = getattr(self.model, "contact", None)
+        return min(dt, contact.stable_time_step()) if hasattr(contact, "stable_time_step") else dt
 
     def run(self) -> Summary:
         """Step the scene; the Summary of a run we stand behind (status "ok" or "warnings").
