@@ -151,3 +151,15 @@ class ContactBase:
         f = np.zeros((self.model.n_points, 3))
         f[self.surface.nodes] = -self.gradient(u)[self.dofs].reshape(-1, 3)
         return f
+
+    def nodal_pressure(self, u) -> np.ndarray:
+        """(n_points,): |contact force| / the node's share of the rest surface (a third of the area of
+        the triangles around it) [Pa]; zero off the surface."""
+        tri = self.X[self.surface.triangles]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        share = np.bincount(self.surface.triangles.ravel(), weights=np.repeat(area / 3.0, 3),
+                            minlength=self.surface.size)
+        p = np.zeros(self.model.n_points)
+        f = self.gradient(u)[self.dofs].reshape(-1, 3)
+        p[self.surface.nodes] = np.linalg.norm(f, axis=1) / np.where(share > 0, share, np.inf)
+        return p

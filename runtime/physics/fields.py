@@ -94,6 +94,8 @@ FIELDS = {f.name: f for f in (
     # runtime.contact's, through `providers` too: zero off the contact surface
     Field("contact_force", "force the contact (obstacles, other bodies, the body itself) exerts on each node "
           "(runtime.contact)", "N", "vector", _POINT, records=False),
+    Field("contact_pressure", "contact force magnitude per unit rest surface area at each surface node "
+          "(runtime.contact)", "Pa", "scalar", _POINT, records=False),
 )}
 
 # The default of [output] fields: what one looks at first (von Mises: the usual colour map, and
@@ -106,7 +108,8 @@ DEFAULT_FIELDS = ("von_mises", "cauchy_stress", "det_F_min")
 CHUNK = 1024
 
 # Fields another module computes: name -> what provides it.
-PROVIDED = {"reaction": "runtime.physics.reactions", "contact_force": "runtime.contact ([contact] or [[obstacle]])"}
+PROVIDED = {"reaction": "runtime.physics.reactions", "contact_force": "runtime.contact ([contact] or [[obstacle]])",
+            "contact_pressure": "runtime.contact ([contact] or [[obstacle]])"}
 
 
 def split_name(entry: str) -> tuple:

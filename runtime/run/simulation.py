@@ -248,6 +248,7 @@ class Simulation:
         providers = {"reaction": lambda: _reactions.reaction_field(self)}      # runtime.physics.reactions
         if self.model.contact is not None:                                     # runtime.contact
             providers["contact_force"] = lambda: self.model.contact.nodal_forces(self.ctx.u)
+            providers["contact_pressure"] = lambda: self.model.contact.nodal_pressure(self.ctx.u)
         return providers
 
     def _frame_fields(self) -> tuple:
