@@ -125,6 +125,15 @@ def test_history_columns_and_the_contact_force_field(tmp_path):
     assert not f[~top].any() and np.all(f[top, 2] < 0)
     point_fields, _ = sim.fields(["contact_force"])
     assert np.allclose(point_fields["contact_force"], f, rtol=0, atol=1e-9 * plate[2])
+    # the pressure: the force over each node's third of the surrounding rest triangles; integrated
+    # over the loaded top it is the plate's force, its largest value near the mean pressure there
+    p = sim.fields(["contact_pressure"])[0]["contact_pressure"]
+    surface = sim.model.contact.surface
+    X = np.asarray(sim.model.mesh.points)[surface.nodes][surface.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
+    share = np.bincount(surface.triangles.ravel(), np.repeat(area / 3, 3), minlength=surface.size)
+    assert np.sum(p[surface.nodes] * share) == pytest.approx(np.linalg.norm(f, axis=1).sum(), rel=1e-12)
+    assert not p[~top].any() and p[top].max() >= plate[2] / (0.1 * 0.1)
 
 
 # ------------------------------------------------------------------ penalty, explicit integrator
