@@ -112,9 +112,9 @@ def test_newton_converges_quadratically_under_a_large_follower_pressure(monkeypa
     residuals = []
     search = integrators.line_search
 
-    def spy(potential, u, d, g, *args):
+    def spy(potential, u, d, g, *args, **kwargs):
         residuals.append(float(np.linalg.norm(g[potential.free])))
-        return search(potential, u, d, g, *args)
+        return search(potential, u, d, g, *args, **kwargs)
 
     monkeypatch.setattr(integrators, "line_search", spy)
     ctx = Context(model)
