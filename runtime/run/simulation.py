@@ -435,11 +435,6 @@ class Simulation:
         normals, prescribed nodes held; runtime.physics.volume_constraint) and keep the worst relative
         volume error seen after a projection in self.volume_error."""
         constraint, free = model.volume_constraint
-        if model.contact is not None:
-            # nodes the contact pushes on hold still (grad V = 0 on contact nodes, as in the thesis):
-            # moved along their normals they would cross into the obstacle the barrier keeps them from
-            touching = np.linalg.norm(model.contact.nodal_forces(self.ctx.u), axis=1) > 0
-            free = free * ~touching[:, None]
         U = self.ctx.u.reshape(model.n_points, model.dofs_per_node)
         x = model.mesh.points + U[:, :model.dim]
         try:
