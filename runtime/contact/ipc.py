@@ -334,26 +334,11 @@ class IPCContact(ContactBase):
         obstacles = {}
         for k, (o, (lo, hi)) in enumerate(zip(self.obstacles, self.owner)):
             f = -g[lo:hi]
-            c = _reference(o, self.amplitude(o, self.s), self.rest[k])
+            c = o.centre(self.amplitude(o, self.s), self.rest[k])
             obstacles[o.name] = {"force": f.sum(axis=0).tolist(), "moment": np.cross(V[lo:hi] - c, f).sum(axis=0).tolist()}
         return {"pairs": int(len(cs)), "min_distance": float(np.sqrt(d2)) if np.isfinite(d2) else None,
                 "ccd_fraction": float(self.step_ccd), "penetration": None, "obstacles": obstacles,
                 "stiffness": self.kappa}
-
-
-def _reference(o, a, V):
-    """The point an obstacle's moment is taken about, at amplitude value a: its centre."""
-    if o.shape == "plane":
-        p = np.asarray(o.point, float)
-    elif o.shape == "sphere":
-        p = np.asarray(o.center, float)
-    elif o.shape == "capsule":
-        p = 0.5 * (np.asarray(o.a, float) + np.asarray(o.b, float))
-    elif o.shape == "box":
-        p = 0.5 * (np.asarray(o.box[0], float) + np.asarray(o.box[1], float))
-    else:
-        p = V.mean(axis=0)
-    return o.placed(p[None, :], a)[0]
 
 
 def _inside(o, X, V, F) -> np.ndarray:

@@ -62,6 +62,21 @@ class Obstacle:
             return X.copy()
         return X + rigid_displacement(X, a, self.rotation, self.translation)
 
+    def centre(self, a: float, rest=None) -> np.ndarray:
+        """The point moments about the obstacle are taken about, placed at amplitude value a: a plane's
+        point, the centre of a sphere, capsule or box, the mean of a mesh's rest vertices `rest`."""
+        if self.shape == "plane":
+            p = np.asarray(self.point, float)
+        elif self.shape == "sphere":
+            p = np.asarray(self.center, float)
+        elif self.shape == "capsule":
+            p = 0.5 * (np.asarray(self.a, float) + np.asarray(self.b, float))
+        elif self.shape == "box":
+            p = 0.5 * (np.asarray(self.box[0], float) + np.asarray(self.box[1], float))
+        else:
+            p = np.asarray(rest, float).mean(axis=0)
+        return self.placed(p[None, :], a)[0]
+
     def _frame(self, a: float):
         """(R, c): x = R X + c maps the rest frame to the placed one."""
         R, c = np.eye(3), np.zeros(3)

@@ -125,22 +125,10 @@ class PenaltyContact(ContactBase):
         obstacles, pairs, depth = {}, 0, 0.0
         for o, (hit, g, _, _), f in zip(self.obstacles, terms, per):
             on = f                                      # dE/dx on the body = the force on the obstacle
-            c = _centre(o, self.amplitude(o, self.s))
+            c = o.centre(self.amplitude(o, self.s))
             obstacles[o.name] = {"force": on.sum(axis=0).tolist(),
                                  "moment": np.cross(x[hit] - c, on).sum(axis=0).tolist()}
             pairs += hit.size
             depth = max(depth, float(g.max()) if g.size else 0.0)
         return {"pairs": int(pairs), "min_distance": None, "ccd_fraction": None, "penetration": depth,
                 "obstacles": obstacles, "stiffness": self.k}
-
-
-def _centre(o, a):
-    if o.shape == "plane":
-        p = np.asarray(o.point, float)
-    elif o.shape == "sphere":
-        p = np.asarray(o.center, float)
-    elif o.shape == "capsule":
-        p = 0.5 * (np.asarray(o.a, float) + np.asarray(o.b, float))
-    else:
-        p = 0.5 * (np.asarray(o.box[0], float) + np.asarray(o.box[1], float))
-    return o.placed(p[None, :], a)[0]
