@@ -121,6 +121,13 @@ class ContactBase:
     def intersecting(self, u) -> str | None:
         return None
 
+    def add_work(self, increment: float) -> None:
+        """The work the obstacles did on the body over a step (their motion against the contact force):
+        the health monitor's energy balance counts it as external work, and its running total of
+        magnitudes as an energy scale (a scene driven by obstacles alone has no other)."""
+        self.work = getattr(self, "work", 0.0) + float(increment)
+        self.work_scale = getattr(self, "work_scale", 0.0) + abs(float(increment))
+
     def note(self, record: dict) -> None:
         """Keep the run's extremes of the step records (for the summary)."""
         seen = self.__dict__.setdefault("_extremes", {"steps": 0, "max_pairs": 0, "min_distance": None,

@@ -331,6 +331,13 @@ class IPCContact(ContactBase):
         cs = self.collisions(V)
         d2 = cs.compute_minimum_distance(self.mesh, V) if len(cs) else np.inf
         g = self._gradient_all(u, V).reshape(-1, 3)
+        # the obstacles' work on the body over the step: their vertices' moves against the contact
+        # force, trapezoidal between the forces at the step's ends
+        nb = self.n_body
+        last = getattr(self, "_last_obstacles", None)
+        if last is not None and last[0].shape == V[nb:].shape:
+            self.add_work(float(np.sum(0.5 * (last[1] + g[nb:]) * (V[nb:] - last[0]))))
+        self._last_obstacles = (V[nb:].copy(), g[nb:].copy())
         obstacles = {}
         for k, (o, (lo, hi)) in enumerate(zip(self.obstacles, self.owner)):
             f = -g[lo:hi]

@@ -391,7 +391,12 @@ class Simulation:
             wall = time.perf_counter() - t0
             frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
             keep = self._history.keeps(k)
+            # the contact's record first: it adds the obstacles' work of the step to the balance
+            contact_row = None if model.contact is None else self._contact(model.contact, k, info["time"])
             energies = self._energies(k, frame or keep)
+            if model.contact is not None and self.monitor.energy_scale is not None:
+                # the obstacles' work so far scales the balance too (runtime.contact.base.add_work)
+                self.monitor.energy_scale = max(self.monitor.energy_scale, getattr(model.contact, "work_scale", 0.0))
             check = self.monitor.check(self.ctx, k, energies)
             if check.stop:
                 raise _Stop(check.stop + self._hint(k))
@@ -399,7 +404,7 @@ class Simulation:
             row = {"step": k, "time": info["time"], "newton": info["newton"],
                    "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
             if model.contact is not None:
-                row["contact"] = self._contact(model.contact, k, info["time"])
+                row["contact"] = contact_row
             if keep:             # probes and reactions only for the rows the history keeps
                 row["probes"] = model.probe_values(self.ctx.u)
                 row["reactions"] = _as_lists(self.reactions(), ("force", "moment"))
@@ -556,6 +561,9 @@ class Simulation:
         with np.errstate(over="ignore", invalid="ignore"):
             # loads with amplitudes: the loads acting now; follower pressure: its work along the path
             work = model.motion.work(ctx.u, ctx.t) + self._pressure_work(model, ctx.u)
+        contact = getattr(model, "contact", None)
+        if contact is not None:              # moving obstacles' work on the body (runtime.contact)
+            work += getattr(contact, "work", 0.0)
         return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
 
     def _pressure_work(self, model, u) -> float:
