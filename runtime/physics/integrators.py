@@ -414,6 +414,9 @@ class GeneralizedAlpha(_Dynamic):
         r = ctx.asm.forces(u) + self.external_force(t / self.duration) - self.alpha * (self.mass @ v)
         if model.pressure is not None:
             r += model.pressure.forces(u)
+        if model.contact is not None:       # penalty contact at t (runtime.contact.base.METHODS_OF)
+            model.contact.set_pose(t / self.duration)
+            r -= model.contact.gradient(u)
         if self.beta and np.any(v):
             r -= self.beta * (ctx.asm.matrix(ctx.asm.stiffness(u, ctx.project is True)) @ v)
         a = np.zeros_like(u)

@@ -190,3 +190,27 @@ def test_a_scene_driven_by_a_moving_obstacle_alone_balances_its_energy():
     # backward Euler dissipates: the work put in covers what is stored, with a little to spare
     assert work > 0 and elastic > 0.5 * work and elastic + kinetic <= work * (1 + 1e-9)
     assert sim.monitor.energy_scale >= work
+
+
+def test_generalized_alpha_starts_from_an_acceleration_with_the_penalty_forces():
+    """The start acceleration solves M a = f_ext + f_int + f_contact: a rigid lift into a plate (no
+    elastic force) accelerates exactly the vertices pushed back, by k (offset - d) n / m."""
+    from tensormass.runtime.model.model import Model
+    from tensormass.runtime.physics.integrators import make_integrator
+    from tensormass.runtime.physics.newton import Context
+    plate = {"name": "plate", "shape": "plane", "point": [0.05, 0.05, 0.102], "normal": [0, 0, -1]}
+    data = bar(obstacles=[plate], contact={"method": "penalty", "stiffness": 1e4},
+               solver={"kind": "generalized_alpha", "dt": 1e-3, "steps": 1})
+    model = Model.from_scene(Scene.from_dict(copy.deepcopy(data)))
+    ctx = Context(model)
+    integ = make_integrator(ctx)
+    u = np.zeros(model.n_dofs)
+    u.reshape(-1, 3)[:, 2] = 0.005                  # 3 mm into the plate at the top face
+    a = integ.initial_acceleration(u, np.zeros_like(u), 0.0).reshape(-1, 3)
+    top = np.isclose(np.asarray(model.mesh.points)[:, 2], 0.1)
+    m = model.mass.reshape(-1, 3)[:, 2]
+    assert np.allclose(a[top, 2], -1e4 * 0.003 / m[top], rtol=1e-9)
+    free = np.asarray(model.free_dofs)
+    rest = np.ones(model.n_points, bool)
+    rest[top] = False
+    assert np.allclose(a.ravel()[np.intersect1d(free, np.flatnonzero(np.repeat(rest, 3)))], 0.0, atol=1e-9)
