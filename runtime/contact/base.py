@@ -13,7 +13,7 @@ METHODS_OF.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -48,7 +48,6 @@ class ContactSpec:
     bodies: bool = True                   # distinct bodies of the mesh against each other
     check_every: int = 1                  # IPC: intersection test of the contact surfaces every this many steps
     max_penetration: float | None = None  # penalty: warn above this [m]; None: 1e-3 x body diagonal
-    given: tuple = field(default_factory=tuple)   # the keys the scene gave (for messages)
 
 
 def check_integrator(kind: str, method: str) -> None:
@@ -117,6 +116,10 @@ class ContactBase:
 
     def pose_load(self, u):
         return None
+
+    def stable_time_step(self) -> float:
+        """The explicit step the contact itself allows (penalty springs); no limit of its own here."""
+        return np.inf
 
     def intersecting(self, u) -> str | None:
         return None

@@ -221,15 +221,6 @@ class IPCContact(ContactBase):
                                                            self.diagonal, dmin=self.dmin)
         self._last_min = d2 if np.isfinite(d2) else None
 
-    def pose_fraction(self, u, s1) -> float:
-        """The share of the obstacles' move from the current pose to s1 that CCD allows with the body at u."""
-        target = self._obstacle_vertices(s1)
-        if not self.obstacles or np.array_equal(target, self.obstacle_V):
-            return 1.0
-        return float(self.ipc.compute_collision_free_stepsize(self.mesh, self.vertices(u), self.vertices(u, target),
-                                                              min_distance=self.dmin, broad_phase=self.broad,
-                                                              narrow_phase_ccd=self.ccd))
-
     # -- the obstacles' move within Newton: a prescribed motion like that of fixed dofs ----------------
     def pose_moving(self) -> bool:
         return self.target is not None and self.s != self.target and self.moves

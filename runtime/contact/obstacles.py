@@ -77,7 +77,7 @@ class Obstacle:
             p = np.asarray(rest, float).mean(axis=0)
         return self.placed(p[None, :], a)[0]
 
-    def _frame(self, a: float):
+    def frame(self, a: float):
         """(R, c): x = R X + c maps the rest frame to the placed one."""
         R, c = np.eye(3), np.zeros(3)
         if self.rotation is not None:
@@ -138,7 +138,7 @@ class Obstacle:
 
         d: signed distance (< 0 inside), n: the unit outward normal of the nearest surface point,
         curvature: dn/dx (n, 3, 3), exact where d < 0 (what the penalty's Hessian needs)."""
-        R, c = self._frame(a)
+        R, c = self.frame(a)
         X = (np.asarray(x, dtype=float) - c) @ R            # R^T (x - c), row-wise
         d, n, dn = self._rest_distance(X)
         n = n @ R.T

@@ -114,10 +114,6 @@ class PenaltyContact(ContactBase):
     def settings(self) -> dict:
         return {"stiffness": self.k, "max_penetration_allowed": self.max_penetration}
 
-    def forces(self, u) -> np.ndarray:
-        """The penalty forces on every dof (explicit steps)."""
-        return -self.gradient(u)
-
     def record(self, u) -> dict:
         terms = self._terms(u)
         _, per = self._vertex_gradient(u, terms)
@@ -128,8 +124,8 @@ class PenaltyContact(ContactBase):
             if last is not None and o.moves and hit.size:
                 # work on the body: the force at each vertex inside times the move over the step of the
                 # obstacle's point under it (the rigid motion from the last pose to this one)
-                R0, c0 = o._frame(self.amplitude(o, last))
-                R1, c1 = o._frame(self.amplitude(o, self.s))
+                R0, c0 = o.frame(self.amplitude(o, last))
+                R1, c1 = o.frame(self.amplitude(o, self.s))
                 X = (x[hit] - c1) @ R1                  # the obstacle's rest frame
                 self.add_work(float(np.sum(-f * (x[hit] - (X @ R0.T + c0)))))
             on = f                                      # dE/dx on the body = the force on the obstacle

@@ -43,7 +43,7 @@ _MOTION = ("name", "shape", "translation", "rotation", "amplitude")
 def parse_contact(parser, t) -> ContactSpec:
     t = parser.table(t, "contact")
     parser.keys(t, "contact", CONTACT_KEYS)
-    spec = ContactSpec(given=tuple(t))
+    spec = ContactSpec()
     if "method" in t:
         spec.method = parser.string(t["method"], "contact.method", METHODS)
     if "dhat" in t:

@@ -287,7 +287,7 @@ class Simulation:
         """2 / omega_max at rest, and below the penalty contact's springs' own limit (runtime.contact)."""
         dt = stable_time_step(ctx)
         contact = getattr(self.model, "contact", None)
-        return min(dt, contact.stable_time_step()) if hasattr(contact, "stable_time_step") else dt
+        return dt if contact is None else min(dt, contact.stable_time_step())
 
     def run(self) -> Summary:
         """Step the scene; the Summary of a run we stand behind (status "ok" or "warnings").
@@ -519,7 +519,7 @@ class Simulation:
         self.model, self.ctx = model, ctx
         self.integrator = make_integrator(ctx)
         if isinstance(self.integrator, Explicit):
-            self.stable_dt = self.integrator.stable_dt = stable_time_step(ctx)
+            self.stable_dt = self.integrator.stable_dt = self._explicit_stable_dt(ctx)
         if self.writer is not None and hasattr(self.writer, "set_mesh"):
             self.writer.set_mesh(model.mesh)
 

@@ -620,13 +620,13 @@ class ConstrainedSystem:
         n = A.shape[0]
         keys = rows * n + cols
         union = self._seen
-        if union is None or not np.all(np.isin(keys, union["keys"])):
+        if union is None or not np.all(np.isin(keys, union["extra_keys"])):
             base = A.tocoo()
             old = np.zeros(0, dtype=np.int64) if union is None else union["extra_keys"]
             extra_keys = np.union1d(old, keys)
             all_keys = np.union1d(base.row.astype(np.int64) * n + base.col, extra_keys)
             indptr = np.searchsorted(all_keys, np.arange(n + 1, dtype=np.int64) * n).astype(A.indptr.dtype)
-            union = self._seen = {"keys": extra_keys, "extra_keys": extra_keys, "all": all_keys,
+            union = self._seen = {"extra_keys": extra_keys, "all": all_keys,
                                   "indptr": indptr, "indices": (all_keys % n).astype(A.indices.dtype),
                                   "base": np.searchsorted(all_keys, base.row.astype(np.int64) * n + base.col)}
         data = np.zeros(union["all"].size)
