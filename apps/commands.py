@@ -307,10 +307,14 @@ def _contact_rows(contact, per_step) -> list:
         how = (f"penalty, up to {contact.get('max_pairs', 0)} vertex(es) inside, deepest "
                f"{num(contact.get('max_penetration'), '.3g')} m")
     rows = [("contact", how)]
+    steps = per_step.get("step") or []
     for name, parts in (per_step.get("obstacles") or {}).items():
-        forces = [f for f in parts.get("force", []) if f is not None]
+        forces = [(k, f) for k, f in zip(steps, parts.get("force", [])) if f is not None]
         if forces:
-            rows.append((f"obstacle {name}", "F = [" + ", ".join(format(x, ".4g") for x in forces[-1]) + "] N (last step)"))
+            k, peak = max(forces, key=lambda kf: sum(x * x for x in kf[1]))
+            text = lambda f: "[" + ", ".join(format(x, ".4g") for x in f) + "] N"   # noqa: E731
+            rows.append((f"obstacle {name}", f"F = {text(forces[-1][1])} at the end; largest {text(peak)} "
+                                             f"at step {k}"))
     return rows
 
 

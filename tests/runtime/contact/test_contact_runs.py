@@ -214,3 +214,14 @@ def test_generalized_alpha_starts_from_an_acceleration_with_the_penalty_forces()
     rest = np.ones(model.n_points, bool)
     rest[top] = False
     assert np.allclose(a.ravel()[np.intersect1d(free, np.flatnonzero(np.repeat(rest, 3)))], 0.0, atol=1e-9)
+
+
+def test_the_run_report_names_each_obstacles_last_and_largest_force():
+    """`tensormass run` prints, per obstacle, the force at the end and the largest one with its step
+    (a tool that has left the body at the end would otherwise show nothing)."""
+    from tensormass.apps.commands import _contact_rows
+    contact = {"method": "ipc", "max_pairs": 3, "min_distance": 1e-5, "dhat": 1e-4, "min_ccd_fraction": 0.5}
+    per_step = {"step": [1, 2, 3], "obstacles": {"tool": {"force": [[0, 0, 1.0], [0, 3.0, 4.0], [0, 0, 0]]}}}
+    rows = dict(_contact_rows(contact, per_step))
+    assert rows["obstacle tool"] == "F = [0, 0, 0] N at the end; largest [0, 3, 4] N at step 2"
+    assert "up to 3 pair(s)" in rows["contact"] and "dhat 0.0001 m" in rows["contact"]
