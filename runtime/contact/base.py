@@ -96,10 +96,10 @@ class ContactBase:
         out[self.dofs] = g_body
         return out
 
-    def to_global(self, H) -> sp.csr_matrix:
-        """A (3m x 3m) matrix over the surface's vertices as an (n_dofs x n_dofs) matrix."""
-        H = H.tocoo()
-        return sp.csr_matrix((H.data, (self.dofs[H.row], self.dofs[H.col])), shape=(self.n_dofs, self.n_dofs))
+    def to_global(self, rows, cols, values) -> sp.coo_matrix:
+        """Entries over the surface's vertex dofs as an (n_dofs x n_dofs) matrix (COO: Newton adds it to
+        its own matrix entry by entry, so nothing here is sorted or compressed)."""
+        return sp.coo_matrix((values, (self.dofs[rows], self.dofs[cols])), shape=(self.n_dofs, self.n_dofs))
 
     def max_step(self, u, d) -> float:
         return 1.0

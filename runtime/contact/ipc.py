@@ -25,10 +25,14 @@ itself when [contact] self = true.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
+import scipy.sparse as sp
 
 from ..base.errors import TensormassError
 from .base import ContactBase
+from .candidates import CandidateCache
 
 __all__ = ["IPCContact", "import_ipctk"]
 
@@ -40,6 +44,10 @@ def import_ipctk():
     except ImportError:
         raise TensormassError("contact.method = \"ipc\" needs the IPC Toolkit (a dependency of tensormass that is "
                               "not importable here): pip install ipctk; contact.method = \"penalty\" runs without it") from None
+    # one thread: ipctk sums its per-pair gradients and Hessians over threads in the order they finish,
+    # so with more than one the same state gave Hessians 1e-17 apart (same scene, different bits)
+    if ipctk.get_num_threads() != 1:
+        ipctk.set_num_threads(1)
     return ipctk
 
 
@@ -87,6 +95,8 @@ class IPCContact(ContactBase):
         # additive CCD (conservative by construction): ipctk's default Tight Inclusion searched its full
         # 1e7 iterations on a plane pressed flat on a face (parallel edges), 25 s for one step of 27 nodes
         self.ccd = ipc.AdditiveCCD()
+        self.ccd_seconds = 0.0
+        self.candidates = CandidateCache(ipc, self.mesh, self.broad, reach=self.dhat + self.dmin, margin=self.dhat)
         self.target = None                   # the pose the obstacles move to within this step's Newton
         self.moves = any(o.moves for o in obstacles)
         self._coupling = None                # body x obstacle block of the last Hessian
@@ -126,10 +136,8 @@ class IPCContact(ContactBase):
         if self._cache is not None and np.array_equal(self._cache[0], V):
             return self._cache[1]
         ipc = self.ipc
-        candidates = ipc.Candidates()
-        candidates.build(self.mesh, V, self.dhat + self.dmin, broad_phase=self.broad)
         cs = ipc.NormalCollisions()
-        cs.build(candidates, self.mesh, V, self.dhat, self.dmin)
+        cs.build(self.candidates.at(V), self.mesh, V, self.dhat, self.dmin)
         self._cache = (V.copy(), cs)
         return cs
 
@@ -287,9 +295,13 @@ class IPCContact(ContactBase):
         if self.tangential is not None and len(self.tangential):
             H = H + self._friction.hessian(self.tangential, self.mesh, self._velocities(V),
                                            project_hessian_to_psd=psd) / self.h
-        H = H.tocsr()
-        self._coupling = H[:nb3, nb3:] if self.obstacles else None
-        return self.to_global(H[:nb3, :nb3])
+        H = H.tocoo()
+        body = H.row < nb3
+        inner = body & (H.col < nb3)
+        outer = body & ~inner
+        self._coupling = sp.coo_matrix((H.data[outer], (H.row[outer], H.col[outer] - nb3)),
+                                       shape=(nb3, H.shape[1] - nb3)) if self.obstacles else None
+        return self.to_global(H.row[inner], H.col[inner], H.data[inner])
 
     def max_step(self, u, d) -> float:
         """The largest a <= 1 for which the path to (u + a d, the obstacles a of the way to their target)
@@ -298,9 +310,12 @@ class IPCContact(ContactBase):
         if not np.any(d[self.dofs]) and not moving:
             return 1.0
         end = self._obstacle_vertices(self.target) if moving else None
-        a = float(self.ipc.compute_collision_free_stepsize(self.mesh, self.vertices(u), self.vertices(u + d, end),
-                                                           min_distance=self.dmin, broad_phase=self.broad,
-                                                           narrow_phase_ccd=self.ccd))
+        V0, V1 = self.vertices(u), self.vertices(u + d, end)
+        candidates = self.candidates.along(V0, V1)
+        start = time.perf_counter()
+        a = float(candidates.compute_collision_free_stepsize(self.mesh, V0, V1, min_distance=self.dmin,
+                                                             narrow_phase_ccd=self.ccd))
+        self.ccd_seconds += time.perf_counter() - start      # read by benchmarks only
         self.step_ccd = min(self.step_ccd, a)
         return a
 

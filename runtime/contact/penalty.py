@@ -15,7 +15,6 @@ analytic distance and are refused here (IPC takes them); so are contacts between
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..base.errors import TensormassError
 from .base import ContactBase
@@ -100,9 +99,7 @@ class PenaltyContact(ContactBase):
             vals.append(H.ravel())
         if not rows or not sum(v.size for v in vals):
             return None
-        m = 3 * self.surface.size
-        H = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m))
-        return self.to_global(H)
+        return self.to_global(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals))
 
     def stable_time_step(self) -> float:
         """2 sqrt(m / k): the explicit step above which the lightest surface node bouncing on its

@@ -533,6 +533,22 @@ def warm_up(index_dtype=np.int32, pointer_dtype=np.int32, paths=NUMBA_PATHS) -> 
             _warm.add(key)
 
 
+def _sorted_csr(data, indices, indptr, shape, canonical=True) -> sp.csr_matrix:
+    """A CSR matrix on index arrays known (canonical=True) to be sorted without duplicates: the flag
+    spares the solver its O(nnz) check of every new matrix of a pattern checked once."""
+    A = sp.csr_matrix((data, indices, indptr), shape=shape)
+    if canonical:
+        A.has_sorted_indices = True
+        A.has_canonical_format = True
+    return A
+
+
+def _all_in(keys: np.ndarray, sorted_keys: np.ndarray) -> bool:
+    """Whether every key is one of sorted_keys (sorted, unique)."""
+    at = np.searchsorted(sorted_keys, keys)
+    return bool(np.all(at < sorted_keys.size) and np.array_equal(sorted_keys[np.minimum(at, sorted_keys.size - 1)], keys))
+
+
 class ConstrainedSystem:
     """Dirichlet conditions by elimination on a fixed global CSR pattern.
 
@@ -549,6 +565,8 @@ class ConstrainedSystem:
         # rigid-body modes of the free dofs (multigrid's near-nullspace), or None
         self.modes = None if modes is None else np.ascontiguousarray(modes[free])
         self.ff = pattern.submatrix_map(free, free)
+        entries, indices, indptr, shape = self.ff
+        self._ff_canonical = bool(sp.csr_matrix((np.ones(entries.size), indices, indptr), shape=shape).has_canonical_format)
         self._fc = None                  # free/fixed block: built on first use (moving constraints only)
         self._seen = None                # every free/free entry an extra matrix (contact) has had so far
 
@@ -567,10 +585,9 @@ class ConstrainedSystem:
             self._fc = self.pattern.submatrix_map(self.free, self.fixed)
         return self._fc
 
-    @staticmethod
-    def _block(data, block):
+    def _block(self, data, block):
         entries, indices, indptr, shape = block
-        return sp.csr_matrix((data[entries], indices, indptr), shape=shape)
+        return _sorted_csr(data[entries], indices, indptr, shape, block is self.ff and self._ff_canonical)
 
     def solve(self, solver: LinearSolver, data: np.ndarray, b: np.ndarray, x_c=None, x0=None, extra=None):
         """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations).
@@ -589,16 +606,17 @@ class ConstrainedSystem:
         if moving:
             x[self.fixed] = x_c
             rhs = rhs - self._block(data, self.fc) @ x_c
-        A = self._block(data, self.ff)
-        if extra is not None:
-            E = sp.coo_matrix(extra)
+        if extra is None:
+            A = self._block(data, self.ff)
+        else:
+            E = extra if sp.isspmatrix_coo(extra) else sp.coo_matrix(extra)
             where = self._free_index()
             r, c = where[E.row], where[E.col]
             if moving:
                 ext = (r >= 0) & (c < 0)
                 rhs = rhs - np.bincount(r[ext], weights=E.data[ext] * x_c[-c[ext] - 1], minlength=self.free.size)
             inner = (r >= 0) & (c >= 0)
-            A = self._with_extra(A, r[inner], c[inner], E.data[inner])
+            A = self._with_extra(data, r[inner], c[inner], E.data[inner])
         guess = None if x0 is None else x0[self.free]
         solver.near_nullspace = self.modes
         x[self.free], its = solver.solve(A, rhs, guess)
@@ -613,26 +631,45 @@ class ConstrainedSystem:
             self._where = where
         return self._where
 
-    def _with_extra(self, A, rows, cols, values):
-        """A + E on the union of A's pattern and every entry E has had (see solve).  The union's
-        index arrays are kept and reused, so the solver sees the same pattern object (and keeps its
-        analysis) until a new pair appears; only the values are scattered each time."""
-        n = A.shape[0]
+    def _with_extra(self, data, rows, cols, values):
+        """The free block of `data` plus the entries (rows, cols, values) of E, on the union of the
+        block's pattern and every entry E has had (see solve).  The union's index arrays and the map
+        from `data` into it are kept, so the solver sees the same pattern object (and keeps its
+        analysis) until an entry outside the union appears: a body against an obstacle adds none
+        (its pairs couple nodes of one surface triangle or edge, which the mesh couples already).
+        Each call is one gather and a scatter of E's few entries."""
+        entries, indices, indptr, shape = self.ff
+        if not self._ff_canonical:                   # (no pattern builds such a block; kept correct anyway)
+            return (self._block(data, self.ff) + sp.coo_matrix((values, (rows, cols)), shape=shape)).tocsr()
+        n = shape[0]
         keys = rows * n + cols
         union = self._seen
-        if union is None or not np.all(np.isin(keys, union["extra_keys"])):
-            base = A.tocoo()
-            old = np.zeros(0, dtype=np.int64) if union is None else union["extra_keys"]
-            extra_keys = np.union1d(old, keys)
-            all_keys = np.union1d(base.row.astype(np.int64) * n + base.col, extra_keys)
-            indptr = np.searchsorted(all_keys, np.arange(n + 1, dtype=np.int64) * n).astype(A.indptr.dtype)
-            union = self._seen = {"extra_keys": extra_keys, "all": all_keys,
-                                  "indptr": indptr, "indices": (all_keys % n).astype(A.indices.dtype),
-                                  "base": np.searchsorted(all_keys, base.row.astype(np.int64) * n + base.col)}
-        data = np.zeros(union["all"].size)
-        data[union["base"]] = A.data           # tocoo keeps the data's order
-        np.add.at(data, np.searchsorted(union["all"], keys), values)
-        return sp.csr_matrix((data, union["indices"], union["indptr"]), shape=A.shape)
+        if union is None:
+            base_keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr)) * n + indices
+            union = self._seen = {"base_keys": base_keys, "all": base_keys, "source": entries,
+                                  "only_extra": np.zeros(0, dtype=np.int64), "indptr": indptr, "indices": indices}
+        if not _all_in(keys, union["all"]):
+            union = self._seen = self._grown(union, keys, n)
+        merged = data[union["source"]]
+        merged[union["only_extra"]] = 0.0
+        np.add.at(merged, np.searchsorted(union["all"], keys), values)
+        return _sorted_csr(merged, union["indices"], union["indptr"], shape)
+
+    def _grown(self, union, keys, n) -> dict:
+        """The union with the keys it lacks inserted (a sorted merge: the new keys are few)."""
+        at = np.searchsorted(union["all"], keys)
+        present = (at < union["all"].size) & (union["all"][np.minimum(at, union["all"].size - 1)] == keys)
+        new = np.unique(keys[~present])
+        all_keys = np.insert(union["all"], np.searchsorted(union["all"], new), new)
+        base = np.searchsorted(all_keys, union["base_keys"])
+        source = np.zeros(all_keys.size, dtype=np.int64)
+        source[base] = self.ff[0]
+        only_extra = np.ones(all_keys.size, dtype=bool)
+        only_extra[base] = False
+        return {"base_keys": union["base_keys"], "all": all_keys, "source": source,
+                "only_extra": np.flatnonzero(only_extra),
+                "indptr": np.searchsorted(all_keys, np.arange(n + 1, dtype=np.int64) * n).astype(self.ff[2].dtype),
+                "indices": (all_keys % n).astype(self.ff[1].dtype)}
 
     def _solve_constrained(self, solver, data, b, x_c, x0):
         """The hanging-node constrained system: P^T A P, P^T b on the free dofs, then x = P x."""
