@@ -156,12 +156,14 @@ def print_stable_step(sim, stream=None) -> str | None:
     crit, dt = getattr(sim, "stable_dt", None), getattr(getattr(sim, "integrator", None), "dt", None)
     if crit is None or dt is None or not math.isfinite(crit):
         return None
+    how = "2 / omega_max" + (", penalty springs counted" if getattr(sim.model, "contact", None) is not None
+                             and math.isfinite(sim.model.contact.stable_time_step()) else "")
     if dt > crit:
         line = (f"explicit: dt = {_fmt_seconds(dt)} is above the stable step estimated at rest, "
-                f"{_fmt_seconds(crit)} (2 / omega_max): expect the run to diverge or an element to invert; "
+                f"{_fmt_seconds(crit)} ({how}): expect the run to diverge or an element to invert; "
                 f"use dt <= {crit:.3g} s or implicit_euler / backward_euler")
     else:
-        line = f"explicit: dt = {_fmt_seconds(dt)}, stable step estimated at rest {_fmt_seconds(crit)} (2 / omega_max)"
+        line = f"explicit: dt = {_fmt_seconds(dt)}, stable step estimated at rest {_fmt_seconds(crit)} ({how})"
     print(f"advice: {line}", file=stream if stream is not None else sys.stdout)
     return line
 

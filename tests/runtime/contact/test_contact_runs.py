@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tensormass.runtime.contact.surface import contact_surface
+from tensormass.runtime.physics.integrators import stable_time_step
 from tensormass.runtime.run.simulation import Simulation
 from tensormass.runtime.scene.scene import Scene
 
@@ -225,3 +226,21 @@ def test_the_run_report_names_each_obstacles_last_and_largest_force():
     rows = dict(_contact_rows(contact, per_step))
     assert rows["obstacle tool"] == "F = [0, 0, 0] N at the end; largest [0, 3, 4] N at step 2"
     assert "up to 3 pair(s)" in rows["contact"] and "dhat 0.0001 m" in rows["contact"]
+
+
+def test_the_explicit_stable_step_adds_the_penalty_springs_to_the_body():
+    """A block pressed into a penalty floor: 2 / omega_max of the lumped M^-1 (K + K_penalty) there is
+    above the run's stable step (a safe bound), and below the smaller of the elastic and spring
+    steps taken alone (what taking the smaller one missed)."""
+    sim = Simulation(Scene.from_dict(copy.deepcopy(PENALTY_DROP)), output=False)
+    sim.run()
+    model, contact, u = sim.model, sim.model.contact, sim.ctx.u.copy()
+    u[2::3] -= 5e-4                                    # every bottom node inside the floor
+    H = contact.hessian(u, False)
+    assert H is not None and contact.stable_time_step() < np.inf
+    K = sim.ctx.asm.matrix(sim.ctx.asm.stiffness(u))
+    scale = 1.0 / np.sqrt(np.asarray(model.mass, dtype=float))
+    A = (K + H).toarray() * scale[:, None] * scale[None, :]
+    dt_true = 2.0 / np.sqrt(np.linalg.eigvalsh(0.5 * (A + A.T)).max())
+    alone = min(stable_time_step(sim.ctx), contact.stable_time_step())
+    assert sim.stable_dt <= dt_true < alone
