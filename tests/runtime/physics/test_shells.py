@@ -385,3 +385,24 @@ def test_a_probe_between_nodes_interpolates_on_its_triangle():
     assert np.allclose(probe.value(U), probe.weights @ U[probe.nodes])
     with pytest.raises(ProbeError, match="'above' .* not on the shell surface"):
         locate_point(mesh, [0.5, 0.5, 0.5], "above")
+
+
+def test_an_explicit_shell_whose_rotations_run_away_is_stopped_naming_them():
+    """Explicit shells: a nodal rotation past MAX_ROTATION while the translations stay bounded stops
+    the run saying so (not blaming dt); a translation past 1e3 body sizes still reads as dt."""
+    from tensormass.runtime.base.errors import TensormassError
+    from tensormass.runtime.physics.integrators import MAX_ROTATION
+    scene = Scene.from_dict({"mesh": {"generate": "plate", "size": [1.0, 1.0], "cells": [2, 2]},
+                             "material": [{"law": "cst_dkt", "E": E, "nu": NU, "thickness": H, "density": 100.0}],
+                             "solver": {"kind": "explicit", "dt": 1e-5, "steps": 1, "backend": "c"}})
+    sim = Simulation(scene, output=False)
+    sim.run()
+    integ, model = sim.integrator, sim.model
+    dpn = model.dofs_per_node
+    u = np.zeros(model.n_dofs)
+    u[3::dpn] = 2 * MAX_ROTATION                       # a rotation about x at every node
+    with pytest.raises(TensormassError, match=r"rotations reached 2e\+03 rad while no node moved more than 0 m"):
+        integ._check(u, np.zeros_like(u), 7)
+    u[0::dpn] = 2e3 * model.size
+    with pytest.raises(TensormassError, match="stable step"):
+        integ._check(u, np.zeros_like(u), 8)
