@@ -543,10 +543,10 @@ def _sorted_csr(data, indices, indptr, shape, canonical=True) -> sp.csr_matrix:
     return A
 
 
-def _all_in(keys: np.ndarray, sorted_keys: np.ndarray) -> bool:
-    """Whether every key is one of sorted_keys (sorted, unique)."""
-    at = np.searchsorted(sorted_keys, keys)
-    return bool(np.all(at < sorted_keys.size) and np.array_equal(sorted_keys[np.minimum(at, sorted_keys.size - 1)], keys))
+def _present(keys: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """Per key: whether it is one of sorted_keys (sorted, unique)."""
+    at = np.minimum(np.searchsorted(sorted_keys, keys), max(sorted_keys.size - 1, 0))
+    return sorted_keys[at] == keys if sorted_keys.size else np.zeros(keys.shape, dtype=bool)
 
 
 class ConstrainedSystem:
@@ -648,18 +648,16 @@ class ConstrainedSystem:
             base_keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr)) * n + indices
             union = self._seen = {"base_keys": base_keys, "all": base_keys, "source": entries,
                                   "only_extra": np.zeros(0, dtype=np.int64), "indptr": indptr, "indices": indices}
-        if not _all_in(keys, union["all"]):
-            union = self._seen = self._grown(union, keys, n)
+        present = _present(keys, union["all"])
+        if not present.all():
+            union = self._seen = self._grown(union, np.unique(keys[~present]), n)
         merged = data[union["source"]]
         merged[union["only_extra"]] = 0.0
         np.add.at(merged, np.searchsorted(union["all"], keys), values)
         return _sorted_csr(merged, union["indices"], union["indptr"], shape)
 
-    def _grown(self, union, keys, n) -> dict:
-        """The union with the keys it lacks inserted (a sorted merge: the new keys are few)."""
-        at = np.searchsorted(union["all"], keys)
-        present = (at < union["all"].size) & (union["all"][np.minimum(at, union["all"].size - 1)] == keys)
-        new = np.unique(keys[~present])
+    def _grown(self, union, new, n) -> dict:
+        """The union with the new keys (sorted, unique, none in it) inserted: a sorted merge."""
         all_keys = np.insert(union["all"], np.searchsorted(union["all"], new), new)
         base = np.searchsorted(all_keys, union["base_keys"])
         source = np.zeros(all_keys.size, dtype=np.int64)

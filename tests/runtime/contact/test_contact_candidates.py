@@ -97,3 +97,32 @@ def test_a_contact_run_repeats_bit_for_bit():
     u = _random_move(contact, 0.0, 0, lift=0.5 * DHAT)
     first = contact.hessian(u, False).toarray()
     assert np.abs(first).max() > 0 and np.array_equal(first, contact.hessian(u, False).toarray())
+
+
+def test_a_contact_matrix_is_added_on_the_pattern_and_grows_it_only_off_it():
+    """ConstrainedSystem.solve(extra=): the solution is that of K + E (dense reference); entries the
+    mesh couples already leave the solver's pattern as it was, an entry between two uncoupled nodes
+    grows it (and stays in it when its value is zero later)."""
+    import scipy.sparse as sp
+    from tensormass.runtime.physics.newton import Context
+    model = model_of(bar([], cells=(3, 1, 1)))
+    ctx = Context(model)
+    data = ctx.asm.stiffness(np.zeros(model.n_dofs))
+    K, free = ctx.asm.matrix(data).toarray(), model.free_dofs
+    b = np.random.default_rng(4).uniform(-1.0, 1.0, model.n_dofs)
+    points = np.asarray(model.mesh.points)
+    up = np.flatnonzero(points[:, 2] > 0)                                  # free nodes (the base is held)
+    far = [int(up[np.argmin(points[up, 0])]), int(up[np.argmax(points[up, 0])])]   # in no cell together
+    top = far[0]
+    for nodes, grows in (([top, top], False), (far, True)):
+        rows, cols = 3 * np.array(nodes) + 2, 3 * np.array(nodes[::-1]) + 2
+        E = sp.coo_matrix((np.full(2, 50.0), (rows, cols)), shape=K.shape) + sp.coo_matrix(
+            (np.full(2, 80.0), (rows, rows)), shape=K.shape)
+        before = None if ctx.system._seen is None else ctx.system._seen["indices"]
+        x = ctx.solve(data, b, np.zeros(model.fixed_dofs.size), extra=E.tocoo())
+        A = (K + E.toarray())[np.ix_(free, free)]
+        assert np.allclose(x[free], np.linalg.solve(A, b[free]), rtol=1e-8, atol=1e-12)
+        seen = ctx.system._seen
+        assert (seen["indices"].size > ctx.system.ff[1].size) == grows
+        if before is not None and not grows:
+            assert seen["indices"] is before
