@@ -15,7 +15,9 @@ nearly incompressible cube of tetrahedra; block.py) and hybmss (the thesis' chap
 HybMSS-FD, HybMSS and hexahedral FEM side by side; hybmss.py), cylinder (a thick-walled cylinder
 under internal pressure in plane strain, prism and hexahedral layers against Lame; cylinder.py) and
 incompressible (Newton iterations at nu = 0.499 on the organ and the cantilever, with FElupe's
-plain-Newton counts where it is installed; incompressible.py).
+plain-Newton counts where it is installed; incompressible.py) and dynamics (the organ falling for 1 s:
+time per step against the trajectory's error for the budgeted implicit Euler step, CG caps, dt, explicit;
+dynamics.py, whose rows end with DYNAMICS_COLUMNS).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.physics.formulations) and a
 `case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
 thesis_value (MODEL_COLUMNS);
@@ -81,6 +83,7 @@ from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
 from .cylinder import cylinder
+from .dynamics import DYNAMICS_COLUMNS, dynamics
 from .incompressible import incompressible
 from .block import block
 from .hybmss import hybmss
@@ -166,7 +169,7 @@ def _cantilever_reference(ref_cells) -> tuple:
 def _benchmark_task(name, quick, sweep) -> tuple:
     """One of the other built-in benchmarks as a task: (its result dict, its progress lines)."""
     BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss, "cylinder": cylinder,
-                  "incompressible": incompressible}
+                  "incompressible": incompressible, "dynamics": dynamics}
     lines = []
     return BENCHMARKS[name](quick, lines.append, sweep), lines
 
@@ -394,7 +397,8 @@ def pareto_front(rows, x="time_total", y="error_reference") -> list:
 
 def _csv_bytes(rows) -> bytes:
     buf = io.StringIO()
-    columns = COLUMNS + (MODEL_COLUMNS if any("model" in r for r in rows) else [])
+    columns = (COLUMNS + (MODEL_COLUMNS if any("model" in r for r in rows) else [])
+               + (DYNAMICS_COLUMNS if any("setting" in r for r in rows) else []))
     w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
@@ -547,7 +551,8 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
-                   "adaptive_beam", "refinement", "cook", "block", "hybmss", "cylinder", "incompressible")
+                   "adaptive_beam", "refinement", "cook", "block", "hybmss", "cylinder", "incompressible",
+                   "dynamics")
 
 
 def _resolve(benchmarks) -> list:

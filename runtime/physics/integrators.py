@@ -23,7 +23,7 @@ from .health import safe_norm
 from .newton import Context, IncrementalPotential, Potential, newton
 
 __all__ = ["make_integrator", "integrator_class", "outputs_for", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
-           "GeneralizedAlpha", "stable_time_step"]
+           "GeneralizedAlpha", "StepBudget", "stable_time_step"]
 
 # Dynamic steps that fail (NaN, inversion, no convergence) are retried with dt/2 this many times.
 _MAX_DT_HALVINGS = 3
@@ -127,10 +127,89 @@ class _Dynamic(_Integrator):
             return self._advance(u, v, t + h / 2, h / 2, depth + 1, k)
 
 
+class StepBudget:
+    """The budgeted implicit Euler step's rule for keeping K, and an estimate of what keeping it cost.
+
+    A kept K serves until it is `every` steps old, or until the step error estimated from the forces
+    passes `tolerance` (ImplicitEuler._drift): both read the state, never a clock.
+
+    The cost: while K0 (assembled at the state u_r) is kept, step j is off the exact step from the same
+    state by e_j = A0^-1 h^2 (K_j - K0) v1_j in velocity (the two step equations subtracted).  Taking
+    K_j - K0 as growing with the distance from u_r, K_j - K0 = s_j (K_R - K0) with s_j = |u_j - u_r| /
+    |u_R - u_r| (u_R: where the next refresh assembles K_R), and each velocity error as moving the
+    positions for tau_j = max(h, 1 / omega_j) (a quarter period of the motion, omega_j from Rayleigh's
+    quotient of the displacement, before the exact forces turn it back), the positions are off by about
+        z = sum_j tau_j e_j = A0^-1 h^2 (K_R - K0) w,   w = sum_j s_j tau_j v1_j,
+    computed at that refresh from its K_R (two products and one solve with the kept factor).  `error` is
+    the largest |z| over the largest |u| so far: the interval that cost most.  The intervals are not
+    summed: the forces are exact, so each interval's error is pulled back towards the exact path.
+    A model, not a bound: docs/guide/interactive.md compares it with measured errors.
+    """
+
+    def __init__(self, every: int, tolerance: float):
+        self.every, self.tolerance = every, tolerance
+        self.age = 0                        # steps the kept K has served
+        self.refreshes = 0                  # K assemblies
+        self.checks = 0                     # refreshes that estimated their interval's error
+        self.error = 0.0
+        self.speed = 0.0                    # the largest |v1|_inf so far (the refresh rule's scale)
+        self.amplitude = 0.0                # the largest |u| so far
+        self._origin = None                 # u_r
+        self._weighted = None               # sum_j |u_j - u_r| tau_j v1_j
+        self._omega = None                  # the motion's frequency in this interval
+
+    def keeps(self, estimate: float) -> bool:
+        """Whether the kept K serves this step too (its age and the estimate allow it)."""
+        if self.age >= self.every or estimate > self.tolerance:
+            return False
+        self.age += 1
+        return True
+
+    def interval(self, u) -> np.ndarray | None:
+        """w of the interval a refresh at u ends, or None (nothing kept since the last refresh)."""
+        distance = float(np.linalg.norm(u - self._origin)) if self._origin is not None else 0.0
+        if self._weighted is None or distance <= 0:
+            return None
+        return self._weighted / distance
+
+    def refreshed(self, u, z=None) -> None:
+        """A refresh at u; z: the position error estimated for the interval it ends."""
+        if z is not None and self.amplitude > 0:
+            self.checks += 1
+            self.error = max(self.error, float(np.abs(z).max()) / self.amplitude)
+        self.age = 1
+        self.refreshes += 1
+        self._origin, self._weighted, self._omega = u.copy(), None, None
+
+    def observe(self, u, u1, v1, h, frequency) -> None:
+        """After a step from u to u1 with velocity v1; frequency(): the motion's (rad/s, or 0), asked once
+        per interval (it changes as slowly as K)."""
+        distance = float(np.linalg.norm(u - self._origin))
+        if distance > 0:
+            if self._omega is None:
+                self._omega = frequency()
+            omega = self._omega
+            # a velocity error moves the positions for about a quarter period, 1 / omega, before the
+            # (exact) forces turn it back; at least for the step itself
+            x = distance * max(h, 1.0 / omega if omega > 0 else 0.0) * v1
+            self._weighted = x if self._weighted is None else self._weighted + x
+        self.speed = max(self.speed, float(np.abs(v1).max()))
+        self.amplitude = max(self.amplitude, float(np.abs(u1).max()))
+
+    def summary(self) -> dict:
+        return {"stiffness_every": self.every,
+                "stiffness_tolerance": self.tolerance if np.isfinite(self.tolerance) else None,
+                "refreshes": self.refreshes, "checks": self.checks, "error_estimate": self.error}
+
+
 class ImplicitEuler(_Dynamic):
     """Baraff-Witkin linearly implicit Euler, one linearisation per step:
 
     (M + h D + h^2 K) dv = h (f(x, v) - h K v),  f = f_int + f_ext - D v,  D = alpha M + beta K.
+
+    The budgeted step (solver.stiffness_every = N > 1) keeps K, and so the step's matrix and its factor,
+    for up to N steps (StepBudget's rule); the steps between take the forces at their own state with
+    the kept matrix, which the linear solver solves with its kept factor.  The last step is exact.
     """
     kind = "implicit_euler"
     outputs = KINDS["implicit_euler"].outputs       # runtime.base.integrator_kinds
@@ -138,20 +217,31 @@ class ImplicitEuler(_Dynamic):
     def __init__(self, ctx):
         super().__init__(ctx)
         self._last_dv = None
+        s = self.model.solver
+        every = int(getattr(s, "stiffness_every", 1))
+        self.budget = StepBudget(every, float(getattr(s, "stiffness_tolerance", np.inf))) if every > 1 else None
+        self._kept = None                   # (h, K, A, diagonal of A) of the last assembly (budgeted step)
+        self._previous = None               # (forces, h) of the last step (budgeted step)
+        self._final = False
+
+    def step(self, k: int) -> dict:
+        self._final = k == self.n_steps
+        return super().step(k)
 
     def single(self, u, v, t, h):
         ctx = self.ctx
-        f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
-        Kv = ctx.asm.matrix(K) @ v
+        f_int, K, A, stale, Kv = self._linearisation(u, v, h)
+        if Kv is None:
+            Kv = ctx.asm.matrix(K) @ v
         f = f_int + self.external_force((t + h) / self.duration) - self.alpha * (self.mass @ v) - self.beta * Kv
-        A = self.mass.added((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
         if self.model.pressure is not None:
             f += self.model.pressure.forces(u)
-            self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
         contact, extra = self.model.contact, None
         if contact is not None:             # penalty contact, linearised like the elastic forces
             f, extra = self._contact_terms(contact, u, t, h, f)
         dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
+        if stale is not None:               # a refresh (budgeted step): what the interval it ends cost
+            self._refresh(u, K, stale, h)
         # CG starts from the previous step's dv: consecutive steps change v alike
         dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv, extra=extra)
         self._last_dv = dv if h == self.dt else None
@@ -161,9 +251,71 @@ class ImplicitEuler(_Dynamic):
             residual = residual + extra @ dv / h
         v1 = v + dv
         u1 = u + h * v1
+        if self.budget is not None:
+            self.budget.observe(u, u1, v1, h, lambda: self._frequency(u1, K))
         # the step's equation, A dv / h - (f - h K v) = 0, on every dof: its fixed rows are the reactions
         ctx.residual = (u1, ctx.reduce(residual))
         return u1, v1
+
+    def _frequency(self, u, K) -> float:
+        """The frequency of the body's lowest motion, sqrt(u.Ku / u.Mu) (Rayleigh's quotient of the
+        displacement, which the slow modes dominate), 0 at rest."""
+        free = self.model.free_dofs
+        uu = float(u[free] @ (self.mass @ u)[free])
+        uk = float(u[free] @ (self.ctx.asm.matrix(K) @ u)[free])
+        return float(np.sqrt(uk / uu)) if uu > 0 and uk > 0 else 0.0
+
+    def _refresh(self, u, K, stale, h) -> None:
+        """A refresh of the budgeted step: the kept interval's position error z = A0^-1 h^2 (K - K0) w
+        (StepBudget), solved with the kept factor before the fresh matrix gets a factor of its own."""
+        ctx, budget = self.ctx, self.budget
+        w = budget.interval(u) if stale[0] is not None else None
+        z = None
+        if w is not None:
+            r = h * h * (ctx.asm.matrix(K) @ w - ctx.asm.matrix(stale[0]) @ w)
+            z = ctx.solve(stale[1], r, np.zeros(self.model.fixed_dofs.size))
+        budget.refreshed(u, z)
+        ctx.linear.drop_factor()
+
+    def _drift(self, f_int, Kv, h) -> float:
+        """The velocity error keeping K makes on this step, estimated from the last step's motion:
+        d = f(u) - f(u_prev) + K_kept (u - u_prev) is the stiffness K_kept misses along the motion
+        (u - u_prev = h v), and h d over the kept matrix's diagonal the velocity it moves; over the
+        largest speed so far.  Free: the forces and K_kept v are the step's own."""
+        previous, budget = self._previous, self.budget
+        if previous is None or previous[1] != h or budget.speed <= 0:
+            return 0.0
+        diagonal = self._kept[3]
+        d = f_int - previous[0] + h * Kv
+        free = self.model.free_dofs
+        return h * float(np.abs(d[free] / diagonal[free]).max()) / budget.speed
+
+    def _linearisation(self, u, v, h):
+        """(f_int, K, A, stale, Kv): the forces at u, the stiffness and the step's matrix A = M' + (h beta + h^2) K
+        (+ pressure's); stale: on a refresh of the budgeted step, the kept (K, A) it replaces ((None, None)
+        when they were for another dt or there were none), else None; Kv: K v when it was needed already."""
+        ctx, kept, budget = self.ctx, self._kept, self.budget
+        if kept is not None and kept[0] == h and not self._final:
+            f_int = ctx.asm.forces(u)
+            Kv = ctx.asm.matrix(kept[1]) @ v
+            drift = self._drift(f_int, Kv, h)
+            self._previous = (f_int, h)
+            if budget.keeps(drift):
+                return f_int, kept[1], kept[2], None, Kv
+            K = ctx.asm.stiffness(u, ctx.project is True)
+        else:
+            f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
+        A = self.mass.added((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
+        if self.model.pressure is not None:
+            self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
+        if budget is None:
+            return f_int, K, A, None, None
+        self._previous = (f_int, h)
+        K = K.copy()                        # the assembler's output array goes back to its pool
+        K.flags.writeable = A.flags.writeable = False       # kept: the solver may keep what it built of A
+        self._kept = (h, K, A, ctx.asm.matrix(A).diagonal())
+        same = kept is not None and kept[0] == h
+        return f_int, K, A, (kept[1], kept[2]) if same else (None, None), None
 
     def _contact_terms(self, contact, u, t, h, f):
         """Penalty contact's forces and h^2 x its Hessian at u, the obstacles at the step's end

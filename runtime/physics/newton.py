@@ -50,7 +50,8 @@ class Context:
                  if s.linear in ("auto", "amg") else None)
         self.hanging = getattr(model, "hanging", None)
         self.system = ConstrainedSystem(self.asm.pattern, model.free_dofs, model.fixed_dofs, modes, self.hanging)
-        self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations)
+        self.linear = LinearSolver(s.linear, s.cg_tolerance, s.cg_max_iterations,
+                                   factor_tol=getattr(s, "factor_tolerance", 1e-10))
         if getattr(model, "pressure", None) is not None and not model.pressure.symmetric:
             # follower pressure on an open surface: non-symmetric Newton matrices (runtime/assembly/pressure.py)
             self.linear = LinearSolver("lu", s.cg_tolerance, s.cg_max_iterations)

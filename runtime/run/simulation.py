@@ -46,6 +46,9 @@ HISTORY_MAX = 4096
 # give, is evaluated every this many steps, at every frame and the last step, and for every step the
 # history keeps (runtime.run.history: all of them until HISTORY_MAX rows, then every stride-th).
 EXPLICIT_ENERGY_EVERY = 10
+# The budgeted implicit Euler step (solver.stiffness_every): a warning once the trajectory error keeping K
+# cost, as StepBudget estimates it, passes this share of the largest displacement (docs/guide/interactive.md)
+STEP_ERROR_WARNING = 0.01
 # Exit code of each final status (runtime.base.errors: 0 trusted, 3 not trusted, 130 interrupted).
 _EXIT = {"ok": EXIT_OK, "warnings": EXIT_OK, "invalid": EXIT_UNTRUSTED, "diverged": EXIT_UNTRUSTED,
          "failed": EXIT_UNTRUSTED, "interrupted": EXIT_INTERRUPTED}
@@ -336,6 +339,7 @@ class Simulation:
     def _run(self) -> Summary:
         start = time.perf_counter()
         self._step = 0
+        self._budget_warned = False
         self._history = _History()
         stopped = None
         try:
@@ -381,6 +385,8 @@ class Simulation:
             t0 = time.perf_counter()
             linear = self.ctx.linear_iterations
             info = integ.step(k)
+            if k == integ.n_steps:
+                self._check_budget(k, info["time"])
             if model.volume_constraint is not None:
                 self._preserve_volume(model)
             if self.adapter is not None:
@@ -396,7 +402,10 @@ class Simulation:
             keep = self._history.keeps(k)
             # the contact's record first: it adds the obstacles' work of the step to the balance
             contact_row = None if model.contact is None else self._contact(model.contact, k, info["time"])
-            energies = self._energies(k, frame or keep)
+            if getattr(integ, "budget", None) is not None:      # the budgeted step: the frames written
+                energies = self._energies(k, k == integ.n_steps or (frame and self.writer is not None))
+            else:
+                energies = self._energies(k, frame or keep)
             if model.contact is not None and self.monitor.energy_scale is not None:
                 # the obstacles' work so far scales the balance too (runtime.contact.base.add_work)
                 self.monitor.energy_scale = max(self.monitor.energy_scale, getattr(model.contact, "work_scale", 0.0))
@@ -548,11 +557,12 @@ class Simulation:
         """Elastic, kinetic and external work at the current state (not counted as assembly time).
 
         Explicit runs evaluate the elastic energy only every EXPLICIT_ENERGY_EVERY steps, on frames and
-        on the steps the history keeps (frame=True).
+        on the steps the history keeps; the budgeted implicit Euler step (solver.stiffness_every > 1) every
+        EXPLICIT_ENERGY_EVERY steps and on the frames written (frame=True): an energy costs what the forces do.
         """
         ctx, model = self.ctx, self.model
-        explicit = isinstance(self.integrator, Explicit)
-        due = not explicit or frame or step % EXPLICIT_ENERGY_EVERY == 0
+        sparse = isinstance(self.integrator, Explicit) or getattr(self.integrator, "budget", None) is not None
+        due = not sparse or frame or step % EXPLICIT_ENERGY_EVERY == 0
         elastic = None
         if "energy" in self.integrator.outputs and due:
             saved = ctx.asm.time
@@ -640,7 +650,7 @@ class Simulation:
                   "assembly": ctx.asm.time, "linear_solve": ctx.linear.time,
                   "health": self.monitor.time, "total": setup + h.wall_total},
             iterations={"newton": ctx.newton_iterations, "linear": ctx.linear_iterations,
-                        "linear_solvers": dict(sorted(ctx.linear.counts.items()))},
+                        "linear_solvers": dict(sorted(ctx.linear.counts.items())), **self._budget()},
             probes=model.probe_values(ctx.u), energy=last.get("elastic"), kinetic_energy=last.get("kinetic"),
             stable_dt=self.stable_dt, per_step=h.to_dict(),
             adapt=None if self.adapter is None else self.adapter.summary(model),
@@ -652,6 +662,25 @@ class Simulation:
             units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic,
                          getattr(model, "contact", None) is not None), advice=list(getattr(self, "advice", [])),
             contact=None if getattr(model, "contact", None) is None else model.contact.summary())
+
+    def _budget(self) -> dict:
+        """{"budget": what the budgeted step kept and its measured step error} (runtime.physics.integrators.
+        StepBudget), or nothing when every step is exact."""
+        budget = getattr(getattr(self, "integrator", None), "budget", None)
+        return {} if budget is None else {"budget": budget.summary()}
+
+    def _check_budget(self, k, t) -> None:
+        """A warning at the last step when the budgeted step's estimated trajectory error, over the run's
+        largest displacement, passes STEP_ERROR_WARNING."""
+        budget = getattr(self.integrator, "budget", None)
+        if budget is None or budget.error <= STEP_ERROR_WARNING or self._budget_warned:
+            return
+        self._budget_warned = True
+        self.monitor.warn(k, t, "budget",
+                          f"keeping K between steps moved the trajectory by an estimated {100 * budget.error:.2g} % of "
+                          f"the largest displacement against exact steps (above {100 * STEP_ERROR_WARNING:g} %): lower "
+                          f"solver.stiffness_every ({budget.every}) or solver.stiffness_tolerance ({budget.tolerance:g}), "
+                          "or use mode = \"exact\"")
 
     def _kernel_info(self) -> list:
         """Model.kernel_info with, per part, the colour count of its assembly: segments of one colour

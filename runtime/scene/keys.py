@@ -206,6 +206,18 @@ KEYS = (
     Key("solver", "linear", "string", "auto", choices="runtime.scene.parser:LINEAR_SOLVERS", doc="The linear solver."),
     Key("solver", "cg_tolerance", "number", 1e-8, "1", doc="Relative residual of the CG solves."),
     Key("solver", "cg_max_iterations", "integer", 1000, doc="CG iterations at most."),
+    Key("solver", "mode", "string", "exact", choices="runtime.scene.parser:SOLVER_MODES",
+        doc="exact: every step solved to the tolerances above; interactive: implicit_euler's budgeted step "
+            "(stiffness_every = 50, stiffness_tolerance = 5e-3, factor_tolerance = 1e-4 unless given; "
+            "docs/guide/interactive.md)."),
+    Key("solver", "stiffness_every", "integer", 1,
+        doc="implicit_euler: K, the step's matrix and its factor kept for up to N steps; the steps between take "
+            "fresh forces with the kept matrix. The summary gives the step error this costs."),
+    Key("solver", "stiffness_tolerance", "number", 5e-3, "1",
+        doc="With stiffness_every > 1: K is assembled sooner when a step's velocity error, estimated from the "
+            "forces, passes this share of the largest speed (inf: every N steps only)."),
+    Key("solver", "factor_tolerance", "number", 1e-10, "1",
+        doc="Relative residual a PARDISO factor's solve (fresh or kept) is refined to."),
     Key("solver", "newton_tolerance", "number", 1e-8, "1", doc="Newton's relative residual."),
     Key("solver", "newton_max_iterations", "integer", 25, doc="Newton iterations per step at most."),
     Key("solver", "rayleigh", "array of 2 numbers", (0.0, 0.0), "1/s, s",

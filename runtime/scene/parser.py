@@ -42,7 +42,8 @@ _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "transla
 _LOADS = ("gravity", "force", "traction", "moment", "pressure", "gravity_amplitude")
 _LOAD = ("box", "value", "region")
 _LOAD_OPTIONAL = ("amplitude",)
-_SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "newton_tolerance",
+_SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "mode", "stiffness_every",
+           "stiffness_tolerance", "factor_tolerance", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
            "max_displacement", "on_inversion", "mass", "rho_inf", "threads", "preserve_volume")
 _PROBE = ("name", "point", "region", "box")
@@ -61,6 +62,10 @@ _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days
 # runtime.solve.solvers.METHODS (not imported here: it loads numba; a test checks they agree)
 LINEAR_SOLVERS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 INVERSION_ACTIONS = ("warn", "stop")
+# solver.mode: presets of the budgeted step's keys (docs/guide/interactive.md measures them); keys given
+# beside the mode win
+SOLVER_MODES = {"exact": {},
+                "interactive": {"stiffness_every": 50, "stiffness_tolerance": 5e-3, "factor_tolerance": 1e-4}}
 MASS_KINDS = ("lumped", "consistent")       # runtime/assembly/mass.py
 GENERATORS = ("bar", "plate", "sphere", "ball")   # plate, sphere: shell surfaces (runtime.mesh.surfaces);
                                                   # ball: a tetrahedral solid ball (runtime.mesh.solids)
@@ -459,6 +464,24 @@ class Parser(ValueParser):
             out.gravity_amplitude = self.string(t["gravity_amplitude"], "loads.gravity_amplitude")
         return out
 
+    def budget(self, t, s: Solver) -> None:
+        """solver.mode and the budgeted step's keys: the preset's values, then the keys given."""
+        if "mode" in t:
+            s.mode = self.string(t["mode"], "solver.mode", SOLVER_MODES)
+        for k, v in SOLVER_MODES[s.mode].items():
+            setattr(s, k, v)
+        if "stiffness_every" in t:
+            s.stiffness_every = self.integer(t["stiffness_every"], "solver.stiffness_every", 1)
+        if "stiffness_tolerance" in t:
+            s.stiffness_tolerance = self.number(t["stiffness_tolerance"], "solver.stiffness_tolerance", positive=True,
+                                                allow_inf=True)
+        if "factor_tolerance" in t:
+            s.factor_tolerance = self.number(t["factor_tolerance"], "solver.factor_tolerance", positive=True)
+        if s.stiffness_every > 1 and s.kind != "implicit_euler":
+            why = "solver.mode = \"interactive\"" if "stiffness_every" not in t else f"solver.stiffness_every = {s.stiffness_every}"
+            raise SceneError(f"{why}: only implicit_euler keeps its stiffness between steps (solver.kind is "
+                             f"{s.kind!r}); use kind = \"implicit_euler\" or remove the key")
+
     def solver(self, t) -> Solver:
         self.keys(t, "solver", _SOLVER)
         s = Solver()
@@ -476,6 +499,7 @@ class Parser(ValueParser):
         for k in ("cg_max_iterations", "newton_max_iterations"):
             if k in t:
                 setattr(s, k, self.integer(t[k], f"solver.{k}", 1))
+        self.budget(t, s)
         if "rayleigh" in t:
             raw = t["rayleigh"]
             if not isinstance(raw, list) or len(raw) != 2:

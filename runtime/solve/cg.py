@@ -32,15 +32,16 @@ def reuse_iterations(factor_seconds: float, iteration_seconds: float) -> int:
     return int(min(REUSE_MAX, max(REUSE_MIN, 0.5 * factor_seconds / iteration_seconds)))
 
 
-def refine(A, b, M, exact, max_iterations):
+def refine(A, b, M, exact, max_iterations, tol=DIRECT_TOL):
     """CG on A x = b preconditioned by M ~ A^-1 (see _refine); overflow on a singular matrix is
     expected there (the caller checks the result), not worth a warning."""
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return _refine(A, b, M, exact, max_iterations)
+        return _refine(A, b, M, exact, max_iterations, tol)
 
 
-def _refine(A, b, M, exact, max_iterations):
-    """CG on A x = b preconditioned by M ~ A^-1, from x = M b, to DIRECT_TOL.
+def _refine(A, b, M, exact, max_iterations, tol):
+    """CG on A x = b preconditioned by M ~ A^-1, from x = M b, to the relative residual tol
+    (DIRECT_TOL unless a budgeted step asks for less: solver.factor_tolerance).
 
     exact (M is a float64 factor of A): the first iterate is already a direct
     solve; refinement only polishes it and stops when the residual stops
@@ -53,13 +54,15 @@ def _refine(A, b, M, exact, max_iterations):
     res = np.linalg.norm(r)
     if not np.isfinite(res):
         return None
+    if res <= tol * bnorm:
+        return x, 0                                  # the factor's solve alone: no second solve for z
     best, best_res = x, res
     res0 = res
     z = M(r)
     p = z.copy()
     rz = r @ z
     its = 0
-    while res > DIRECT_TOL * bnorm and its < max_iterations:
+    while res > tol * bnorm and its < max_iterations:
         its += 1
         q = A @ p
         pq = p @ q
@@ -73,17 +76,17 @@ def _refine(A, b, M, exact, max_iterations):
             best, best_res = x, res
         elif exact:
             break                                    # round-off level reached
-        if res <= DIRECT_TOL * bnorm:
+        if res <= tol * bnorm:
             break
-        if not exact and its >= 2 and _hopeless(res0, res, its, DIRECT_TOL * bnorm, max_iterations):
+        if not exact and its >= 2 and _hopeless(res0, res, its, tol * bnorm, max_iterations):
             return None                              # a kept factor too far from A: refactor now
         z = M(r)
         rz_new = r @ z
         p = z + (rz_new / rz) * p
         rz = rz_new
-    if best_res > DIRECT_TOL * bnorm:               # the recursive residual may drift: check
+    if best_res > tol * bnorm:               # the recursive residual may drift: check
         true_res = np.linalg.norm(b - A @ best)
-        if not (true_res <= DIRECT_TOL * bnorm or (exact and true_res <= 1e-6 * bnorm)):
+        if not (true_res <= tol * bnorm or (exact and true_res <= 1e-6 * bnorm)):
             return None
     return best, its
 

@@ -47,7 +47,7 @@ from .choices import (AUTO_BAND_WORK_PER_NNZ, AUTO_DIRECT_BELOW, DIRECT_LIMIT, P
                       PARDISO_FLOPS)
 from .band import (BAND_MAX_ENTRIES, BandPlan, band_costs, band_ordering, band_solve, one_blas_thread,
     reuse_cap)
-from .cg import REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
+from .cg import DIRECT_TOL, REFINE_MAX, ic0, jacobi_factor, pcg, refine, reuse_iterations, unsigned
 from ..base.errors import TensormassError
 from ..base.parallel import worker_threads
 
@@ -223,13 +223,15 @@ class LinearSolver:
 
     reuse: keep the band / PARDISO factor (and the multigrid hierarchy) for the next
     matrix of the same pattern (see the module docstring).
+    factor_tol: the relative residual a PARDISO factor's solve, fresh or kept, is refined to by CG
+    (DIRECT_TOL; a budgeted step takes less: solver.factor_tolerance).
     near_nullspace: (n, k) rigid-body modes of the unknowns for multigrid (set by
     ConstrainedSystem), or None.
     time: seconds spent in solve, reported only (no decision reads it).
     """
 
     def __init__(self, method: str = "auto", tol: float = 1e-8, max_iterations: int = 1000,
-                 preconditioner: str = "ic", reuse: bool = True):
+                 preconditioner: str = "ic", reuse: bool = True, factor_tol: float = DIRECT_TOL):
         if method not in METHODS:
             raise TensormassError(f"unknown linear solver {method!r}; use {', '.join(METHODS)}")
         if preconditioner not in PRECONDITIONERS:
@@ -237,6 +239,7 @@ class LinearSolver:
         if method == "pardiso" and not pardiso.available():
             raise TensormassError(f"linear solver 'pardiso' is unavailable: {pardiso.unavailable_reason()}")
         self.method, self.tol, self.max_iterations = method, float(tol), int(max_iterations)
+        self.factor_tol = float(factor_tol)      # relative residual a PARDISO or kept factor's solve is refined to
         self.preconditioner = preconditioner
         self.converged = True
         self.time = 0.0                          # statistics only: never an input to a decision
@@ -323,6 +326,10 @@ class LinearSolver:
         elif kind == "cg":
             warm_up(A.indices.dtype, A.indptr.dtype, (("cg", "jacobi" if self.preconditioner == "jacobi" else "ic"),))
 
+    def drop_factor(self) -> None:
+        """Factorise the next matrix afresh (a budgeted step's refresh), whatever reuse would do."""
+        self._factor, self._skip_reuse, self._reuse_backoff = None, 0, 0
+
     # -- solve --------------------------------------------------------------------------------
     def solve(self, A, b: np.ndarray, x0: np.ndarray | None = None):
         """(x, iterations); raises TensormassError on a singular system or NaN/Inf."""
@@ -399,7 +406,7 @@ class LinearSolver:
         if self._skip_reuse > 0:
             self._skip_reuse -= 1
             return None
-        out = refine(A, b, old, exact=False, max_iterations=old.reuse_cap)
+        out = refine(A, b, old, exact=False, max_iterations=old.reuse_cap, tol=self.factor_tol)
         if out is not None:
             self._reuse_backoff = 0
             self.last = old.name + "-reuse"
@@ -429,7 +436,7 @@ class LinearSolver:
                 continue
             self.inertia = (positive, negative)
             if negative == 0 and positive == A.shape[0]:
-                out = refine(A, b, factor, exact=not single, max_iterations=REFINE_MAX)
+                out = refine(A, b, factor, exact=not single, max_iterations=REFINE_MAX, tol=self.factor_tol)
                 if out is not None:
                     self._keep(factor)
                     return out[0]
@@ -586,8 +593,16 @@ class ConstrainedSystem:
         return self._fc
 
     def _block(self, data, block):
+        # a read-only data array cannot change: its free block is built once (the kept matrix of a
+        # budgeted implicit Euler step, solved again at every step)
+        kept = getattr(self, "_kept_block", None)
+        if kept is not None and kept[0] is data and kept[1] is block:
+            return kept[2]
         entries, indices, indptr, shape = block
-        return _sorted_csr(data[entries], indices, indptr, shape, block is self.ff and self._ff_canonical)
+        out = _sorted_csr(data[entries], indices, indptr, shape, block is self.ff and self._ff_canonical)
+        if not data.flags.writeable:
+            self._kept_block = (data, block, out)
+        return out
 
     def solve(self, solver: LinearSolver, data: np.ndarray, b: np.ndarray, x_c=None, x0=None, extra=None):
         """Full x with x[fixed] = x_c (zero if None) and A x = b on the free rows; (x, iterations).
