@@ -9,6 +9,11 @@ the organ scaled 2.2x, semi-axes 88 x 66 x 66 mm, meshed by tensormass.apps.orga
     tetra10_h8_static        tetra10, h = 8 mm, static, one load step
     tetra10_h6_static        tetra10, h = 6 mm, static, one load step
     tetra_h6_implicit_euler  tetra (gauss1), h = 6 mm, implicit Euler, 10 steps of 10 ms
+    tetra_h6_1s              the same for 1 s (100 steps), the auto solver only; and _interactive
+                             ([solver] mode = "interactive") and _kept (K kept the whole run) beside
+                             it, each with its speed-up per step over the exact case and its probe
+                             trajectory's error against the exact case's
+    tetra10_h8_1s            tetra10 (gauss2), h = 8 mm, the same 1 s; and _interactive
     hex_cantilever_48x8x8    the neo-Hookean hexahedral cantilever of `bench steps` (48 x 8 x 8,
                              gauss2, E 1 MPa, nu 0.3, gravity), static, one load step: a
                              Newton iteration of a real run
@@ -44,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import subprocess
@@ -90,6 +96,8 @@ class Case:
     size: float = 0.0                  # organ: mesh size (m)
     scale: float = ORGAN_SCALE         # organ: geometry scale
     cells: tuple = ()                  # cantilever: cells along x, y, z
+    solver: tuple = ()                 # extra [solver] keys, (key, value) pairs: the budgeted step
+    exact: str = ""                    # a budgeted case: the exact case it is compared with
 
     @property
     def order(self) -> int:
@@ -102,17 +110,31 @@ class Case:
         return f"organ x{self.scale:g} {self.element} h = {1e3 * self.size:g} mm, {self.kind}"
 
 
+INTERACTIVE = (("mode", "interactive"),)
+KEPT = (("stiffness_every", 10 ** 8), ("stiffness_tolerance", math.inf), ("factor_tolerance", 1e-4))
 CASES = (
     Case("tetra10_h8_static", "organ", "tetra10", "static", 1, size=0.008),
     Case("tetra10_h6_static", "organ", "tetra10", "static", 1, size=0.006),
     Case("tetra_h6_implicit_euler", "organ", "tetra", "implicit_euler", 10, size=0.006),
     Case("hex_cantilever_48x8x8", "cantilever", "hexahedron", "static", 1, cells=(48, 8, 8)),
+    # 1 s of falling, exact and budgeted (runtime.physics.integrators.ImplicitEuler): the auto solver only
+    Case("tetra_h6_1s", "organ", "tetra", "implicit_euler", 100, size=0.006),
+    Case("tetra_h6_1s_interactive", "organ", "tetra", "implicit_euler", 100, size=0.006, solver=INTERACTIVE,
+         exact="tetra_h6_1s"),
+    Case("tetra_h6_1s_kept", "organ", "tetra", "implicit_euler", 100, size=0.006, solver=KEPT, exact="tetra_h6_1s"),
+    Case("tetra10_h8_1s", "organ", "tetra10", "implicit_euler", 100, size=0.008),
+    Case("tetra10_h8_1s_interactive", "organ", "tetra10", "implicit_euler", 100, size=0.008, solver=INTERACTIVE,
+         exact="tetra10_h8_1s"),
 )
 QUICK_CASES = (
     Case("quick_tetra10_h12_static", "organ", "tetra10", "static", 1, size=0.012, scale=1.0),
     Case("quick_tetra_h9_implicit_euler", "organ", "tetra", "implicit_euler", 4, size=0.009, scale=1.0),
+    Case("quick_tetra_h9_interactive", "organ", "tetra", "implicit_euler", 4, size=0.009, scale=1.0,
+         solver=INTERACTIVE, exact="quick_tetra_h9_implicit_euler"),
     Case("quick_hex_cantilever_12x2x4", "cantilever", "hexahedron", "static", 1, cells=(12, 2, 4)),
 )
+# the 1 s cases run with the default solver only (their point is the step, not the solver)
+LONG_STEPS = 100
 QUICK_SOLVERS = ("auto",)
 QUICK_THREADS = (1,)
 
@@ -188,7 +210,13 @@ kind = "{case.kind}"
 steps = {case.steps}
 dt = {DT}
 newton_tolerance = {NEWTON_TOLERANCE}
-"""
+""" + "".join(f"{k} = {_toml(v)}\n" for k, v in case.solver)
+
+
+def _toml(v) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    return "inf" if isinstance(v, float) and math.isinf(v) else repr(v)
 
 
 def scene_text(case: Case, mesh_file: Path | None) -> str:
@@ -252,8 +280,15 @@ def run_tensormass(spec: dict) -> dict:
     case = Case(**{k: tuple(v) if k == "cells" else v for k, v in spec["case"].items()})
     scene = make_scene(scene_text(case, spec.get("mesh")), spec["method"])
     t0 = time.perf_counter()
-    sim = Simulation(scene, output=False)
+    node, trajectory = None, []
+
+    def record(s):                     # the probe node's displacement after every step
+        trajectory.append([float(x) for x in s.displacement[node]])
+
+    dynamic = case.kind != "static"
+    sim = Simulation(scene, output=False, on_step=record if dynamic else None)
     try:
+        node = _nearest_node(sim.model.mesh.points, probe_point(case))
         summary = sim.run().to_dict()
     except TensormassError as error:
         summary = getattr(error, "summary", None)
@@ -267,7 +302,7 @@ def run_tensormass(spec: dict) -> dict:
     newton = int(it["newton"])
     stepping = t["total"] - t["setup"]
     u = sim.displacement
-    node = _nearest_node(sim.model.mesh.points, probe_point(case))
+    walls = [float(w) for w in steps_wall[1:]]
     out = {"status": summary["status"], "wall_s": wall, "total_s": t["total"], "setup_s": t["setup"],
            "stepping_s": stepping, "assembly_s": t["assembly"], "solve_s": t["linear_solve"],
            "newton": newton, "linear_iterations": int(it["linear"]), "steps": summary["steps"],
@@ -276,7 +311,10 @@ def run_tensormass(spec: dict) -> dict:
            "probe_node": node, "probe": [float(x) for x in u[node]], "max_u": float(np.abs(u).max()),
            "per_iteration_ms": 1e3 * stepping / newton if newton else None,
            "first_step_ms": 1e3 * steps_wall[0] if steps_wall else None,
-           "later_steps_ms": 1e3 * float(np.mean(steps_wall[1:])) if len(steps_wall) > 1 else None}
+           "later_steps_ms": 1e3 * float(np.mean(walls)) if walls else None,
+           "p95_steps_ms": 1e3 * float(np.percentile(walls, 95)) if walls else None,
+           "trajectory": trajectory if dynamic else None,
+           "budget": summary["iterations"].get("budget")}
     return out
 
 
@@ -442,7 +480,7 @@ def run_organ_bench(quick=False, cases=None, solvers=None, threads=None, felupe=
             continue
         spec = {"case": asdict(case), "mesh": mesh}
         log(f"{case.name}: {case.title}")
-        for method in methods:
+        for method in (methods if case.steps < LONG_STEPS else [m for m in methods if m == "auto"]):
             for n in threads:
                 r = _subprocess("--worker", dict(spec, method=method), n, timeout)
                 r.update(method=method, threads=n)
@@ -456,6 +494,7 @@ def run_organ_bench(quick=False, cases=None, solvers=None, threads=None, felupe=
             else:
                 log("  " + _felupe_line(fe))
         _compare(entry)
+    _budgets(report["cases"])
     if json_path:
         write_json_atomic(json_path, report)
     return report
@@ -475,6 +514,32 @@ def _compare(entry: dict) -> None:
                                            if fe.get("per_iteration_ms") and r.get("per_iteration_ms") else None)
         a, b = np.asarray(r["probe"]), np.asarray(fe["probe"])
         r["probe_difference"] = float(np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300))
+
+
+def _budgets(entries) -> None:
+    """Each budgeted case's runs against its exact case's run with the same solver and threads: the
+    speed-up per step and the probe trajectory's error (the largest difference over the largest
+    displacement)."""
+    by_name = {e["case"]: e for e in entries}
+    for entry in entries:
+        exact = by_name.get(entry["spec"].get("exact") or "")
+        for r in entry["runs"]:
+            twin = next((x for x in (exact or {}).get("runs", []) if x["method"] == r["method"]
+                         and x["threads"] == r["threads"] and x.get("trajectory")), None)
+            r["exact_ratio"] = r["error_vs_exact"] = None
+            if twin is None or not r.get("trajectory") or not r.get("later_steps_ms"):
+                continue
+            a, b = np.asarray(r["trajectory"]), np.asarray(twin["trajectory"])
+            r["exact_ratio"] = twin["later_steps_ms"] / r["later_steps_ms"]
+            r["error_vs_exact"] = float(np.linalg.norm(a - b, axis=1).max() / max(np.linalg.norm(b, axis=1).max(), 1e-300))
+
+
+def _budget_line(entry, r) -> str:
+    b = r.get("budget") or {}
+    return (f"{entry['case']} {r['method']} {r['threads']} thread(s): {_ms(r['later_steps_ms'])} ms per step "
+            f"(95th percentile {_ms(r.get('p95_steps_ms'))}): {r['exact_ratio']:.2f}x the speed of {entry['spec']['exact']}; "
+            f"trajectory within {100 * r['error_vs_exact']:.3g} % of its (estimated "
+            f"{100 * float(b.get('error_estimate') or 0):.2g} %); K assembled {b.get('refreshes')} times")
 
 
 def _ms(x) -> str:
@@ -542,6 +607,7 @@ def format_organ_report(report: dict) -> str:
                          "-" if r.get("felupe_ratio") is None else f"{r['felupe_ratio']:.1f}x",
                          "-" if r.get("felupe_ratio_per_iteration") is None else f"{r['felupe_ratio_per_iteration']:.1f}x",
                          "-" if r.get("probe_difference") is None else f"{r['probe_difference']:.1e}"))
+        notes += [_budget_line(entry, r) for r in entry["runs"] if r.get("exact_ratio") is not None]
         fe = entry.get("felupe")
         if fe is not None and fe.get("newton_s") is not None:
             rows.append((entry["case"], f"FElupe {fe['version']}", 1, fe["free_dofs"], _s(fe["total_s"]),

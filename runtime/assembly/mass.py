@@ -149,10 +149,6 @@ class MassMatrix:
         data += scale * self._on_pattern(pattern)
         return data
 
-    def added(self, data: np.ndarray, pattern, scale: float = 1.0) -> np.ndarray:
-        """A copy of data with scale M added."""
-        return self.add_to(data.copy(), pattern, scale)
-
     def _on_pattern(self, pattern) -> np.ndarray:
         key = id(pattern)
         if key not in self._pattern_data:

@@ -140,8 +140,9 @@ class StepBudget:
     positions for tau_j = max(h, 1 / omega_j) (a quarter period of the motion, omega_j from Rayleigh's
     quotient of the displacement, before the exact forces turn it back), the positions are off by about
         z = sum_j tau_j e_j = A0^-1 h^2 (K_R - K0) w,   w = sum_j s_j tau_j v1_j,
-    computed at that refresh from its K_R (two products and one solve with the kept factor).  `error` is
-    the largest |z| over the largest |u| so far: the interval that cost most.  The intervals are not
+    computed at that refresh from its K_R, or after the run's last step from K there (two products
+    and one solve with the kept factor).  `error` is the largest |z|_inf over the largest |u|_inf so
+    far: the interval that cost most.  The intervals are not
     summed: the forces are exact, so each interval's error is pulled back towards the exact path.
     A model, not a bound: docs/guide/interactive.md compares it with measured errors.
     """
@@ -149,11 +150,11 @@ class StepBudget:
     def __init__(self, every: int, tolerance: float):
         self.every, self.tolerance = every, tolerance
         self.age = 0                        # steps the kept K has served
-        self.refreshes = 0                  # K assemblies
-        self.checks = 0                     # refreshes that estimated their interval's error
+        self.refreshes = 0                  # K assembled and factorised for the steps
+        self.checks = 0                     # intervals estimated
         self.error = 0.0
         self.speed = 0.0                    # the largest |v1|_inf so far (the refresh rule's scale)
-        self.amplitude = 0.0                # the largest |u| so far
+        self.amplitude = 0.0                # the largest |u|_inf so far
         self._origin = None                 # u_r
         self._weighted = None               # sum_j |u_j - u_r| tau_j v1_j
         self._omega = None                  # the motion's frequency in this interval
@@ -172,11 +173,14 @@ class StepBudget:
             return None
         return self._weighted / distance
 
-    def refreshed(self, u, z=None) -> None:
-        """A refresh at u; z: the position error estimated for the interval it ends."""
-        if z is not None and self.amplitude > 0:
+    def estimated(self, z) -> None:
+        """z: the position error estimated for the interval that ends now."""
+        if self.amplitude > 0:
             self.checks += 1
             self.error = max(self.error, float(np.abs(z).max()) / self.amplitude)
+
+    def refreshed(self, u) -> None:
+        """A refresh at u."""
         self.age = 1
         self.refreshes += 1
         self._origin, self._weighted, self._omega = u.copy(), None, None
@@ -209,7 +213,7 @@ class ImplicitEuler(_Dynamic):
 
     The budgeted step (solver.stiffness_every = N > 1) keeps K, and so the step's matrix and its factor,
     for up to N steps (StepBudget's rule); the steps between take the forces at their own state with
-    the kept matrix, which the linear solver solves with its kept factor.  The last step is exact.
+    the kept matrix, which the linear solver solves with its kept factor.
     """
     kind = "implicit_euler"
     outputs = KINDS["implicit_euler"].outputs       # runtime.base.integrator_kinds
@@ -222,11 +226,16 @@ class ImplicitEuler(_Dynamic):
         self.budget = StepBudget(every, float(getattr(s, "stiffness_tolerance", np.inf))) if every > 1 else None
         self._kept = None                   # (h, K, A, diagonal of A) of the last assembly (budgeted step)
         self._previous = None               # (forces, h) of the last step (budgeted step)
-        self._final = False
 
     def step(self, k: int) -> dict:
-        self._final = k == self.n_steps
-        return super().step(k)
+        info = super().step(k)
+        kept = self._kept
+        if k == self.n_steps and kept is not None and self.budget.age > 1:
+            # the run's last interval: its estimate from K at the final state, with the kept factor (no
+            # new factor: the steps are done)
+            K = self.ctx.asm.stiffness(self.ctx.u, self.ctx.project is True)
+            self._estimate(self.ctx.u, K, (kept[1], kept[2]), kept[0])
+        return info
 
     def single(self, u, v, t, h):
         ctx = self.ctx
@@ -266,16 +275,20 @@ class ImplicitEuler(_Dynamic):
         return float(np.sqrt(uk / uu)) if uu > 0 and uk > 0 else 0.0
 
     def _refresh(self, u, K, stale, h) -> None:
-        """A refresh of the budgeted step: the kept interval's position error z = A0^-1 h^2 (K - K0) w
-        (StepBudget), solved with the kept factor before the fresh matrix gets a factor of its own."""
+        """A refresh of the budgeted step: the estimate of the interval it ends (with the kept factor),
+        then the fresh matrix gets a factor of its own."""
+        self._estimate(u, K, stale, h)
+        self.budget.refreshed(u)
+        self.ctx.linear.drop_factor()
+
+    def _estimate(self, u, K, stale, h) -> None:
+        """The kept interval's position error z = A0^-1 h^2 (K - K0) w (StepBudget) at the state u where
+        K was assembled, solved with the kept factor of A0."""
         ctx, budget = self.ctx, self.budget
         w = budget.interval(u) if stale[0] is not None else None
-        z = None
         if w is not None:
             r = h * h * (ctx.asm.matrix(K) @ w - ctx.asm.matrix(stale[0]) @ w)
-            z = ctx.solve(stale[1], r, np.zeros(self.model.fixed_dofs.size))
-        budget.refreshed(u, z)
-        ctx.linear.drop_factor()
+            budget.estimated(ctx.solve(stale[1], r, np.zeros(self.model.fixed_dofs.size)))
 
     def _drift(self, f_int, Kv, h) -> float:
         """The velocity error keeping K makes on this step, estimated from the last step's motion:
@@ -295,7 +308,7 @@ class ImplicitEuler(_Dynamic):
         (+ pressure's); stale: on a refresh of the budgeted step, the kept (K, A) it replaces ((None, None)
         when they were for another dt or there were none), else None; Kv: K v when it was needed already."""
         ctx, kept, budget = self.ctx, self._kept, self.budget
-        if kept is not None and kept[0] == h and not self._final:
+        if kept is not None and kept[0] == h:
             f_int = ctx.asm.forces(u)
             Kv = ctx.asm.matrix(kept[1]) @ v
             drift = self._drift(f_int, Kv, h)
@@ -305,7 +318,8 @@ class ImplicitEuler(_Dynamic):
             K = ctx.asm.stiffness(u, ctx.project is True)
         else:
             f_int, K = ctx.asm.forces_and_stiffness(u, ctx.project is True)
-        A = self.mass.added((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
+        # the product is a new array: M is added to it in place
+        A = self.mass.add_to((h * self.beta + h * h) * K, ctx.asm.pattern, 1.0 + h * self.alpha)
         if self.model.pressure is not None:
             self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
         if budget is None:

@@ -48,7 +48,7 @@ HISTORY_MAX = 4096
 EXPLICIT_ENERGY_EVERY = 10
 # The budgeted implicit Euler step (solver.stiffness_every): a warning once the trajectory error keeping K
 # cost, as StepBudget estimates it, passes this share of the largest displacement (docs/guide/interactive.md)
-STEP_ERROR_WARNING = 0.01
+STEP_ERROR_WARNING = 0.02
 # Exit code of each final status (runtime.base.errors: 0 trusted, 3 not trusted, 130 interrupted).
 _EXIT = {"ok": EXIT_OK, "warnings": EXIT_OK, "invalid": EXIT_UNTRUSTED, "diverged": EXIT_UNTRUSTED,
          "failed": EXIT_UNTRUSTED, "interrupted": EXIT_INTERRUPTED}
