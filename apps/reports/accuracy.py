@@ -83,7 +83,7 @@ from .adaptive import BENCHMARKS as ADAPTIVE
 from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
 from .cylinder import cylinder
-from .dynamics import DYNAMICS_COLUMNS, dynamics
+from .dynamics import DYNAMICS_COLUMNS, dynamics, plot as dynamics_plot
 from .incompressible import incompressible
 from .block import block
 from .hybmss import hybmss
@@ -455,8 +455,9 @@ def _plot(rows, x, ylabel_title, fronts=None) -> bytes:
             sidx = sorted(sidx, key=lambda i: sub[i]["dofs"])          # lines follow refinement
             pts = [(sub[i][x], sub[i]["error_reference"]) for i in sidx
                    if sub[i][x] > 0 and sub[i]["error_reference"] > 0 and math.isfinite(sub[i]["error_reference"])]
-            if pts:
-                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=markers[k % len(markers)], label=label)
+            if pts:          # a dynamics series is settings, not a refinement: no line between them
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=markers[k % len(markers)], label=label,
+                        ls="none" if "setting" in sub[sidx[0]] else "-")
         front = (fronts or {}).get(bench, [])
         pts = [(rows[i][x], rows[i]["error_reference"]) for i in front
                if rows[i][x] > 0 and rows[i]["error_reference"] > 0]
@@ -633,6 +634,8 @@ def run_accuracy(out_dir, scene_path=None, quick: bool = False, progress=print, 
                   _plot(rows, "time_total", ("total run time [s]", "Error against run time"), fronts))
     write_bytes_atomic(out / "convergence.png",
                   _plot(rows, "dofs", ("free degrees of freedom", "Convergence under mesh refinement")))
+    if any("setting" in r for r in rows):
+        write_bytes_atomic(out / "dynamics.png", dynamics_plot([r for r in rows if "setting" in r]))
     write_bytes_atomic(out / "report.md", _report_md(rows, fronts, results, quick, scene_path, elapsed).encode("utf-8"))
     for bench, front in fronts.items():
         if not front:

@@ -190,7 +190,13 @@ def test_bench_organ_quick(tmp_path, monkeypatch):
             assert case["mesh"]["path"].startswith(str(tmp_path))
     # the meshes are in the given folder, named by the script's hash and the options
     assert sorted(p.name for p in tmp_path.glob("organ-*.msh")) == sorted(
-        bench_organ.mesh_path(c, tmp_path).name for c in bench_organ.QUICK_CASES if c.body == "organ")
+        {bench_organ.mesh_path(c, tmp_path).name for c in bench_organ.QUICK_CASES if c.body == "organ"})
+    # the budgeted case: its speed and its trajectory against its exact twin's, in the same run
+    (budgeted,) = [c for c in data["cases"] if c["spec"]["exact"]]
+    (run,) = budgeted["runs"]
+    assert run["budget"]["refreshes"] >= 1 and run["exact_ratio"] > 0
+    assert 0 < run["error_vs_exact"] < 0.01
+    assert len(run["trajectory"]) == budgeted["spec"]["steps"]
     text = bench_organ.format_organ_report(report)
     assert "quick_tetra10_h12_static" in text and "auto" in text
     if not HAVE_FELUPE:
