@@ -283,13 +283,7 @@ def _check_overlapping_faces(mesh: Mesh, ft: FaceTable) -> None:
         return
     geo = _face_geometry_3d if mesh.dim == 3 else _face_geometry_2d
     centre, radius, normal, test = geo(mesh.points, ft.nodes[rows], ft.nvert[rows])
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(test)
-    near = tree.query_ball_point(centre, radius * (1 + 1e-9) + 1e-300, workers=-1)
-    lens = np.fromiter((len(x) for x in near), dtype=np.int64, count=len(near))
-    j = np.repeat(np.arange(len(rows)), lens)              # face that might contain ...
-    i = np.fromiter((v for x in near for v in x), dtype=np.int64, count=int(lens.sum()))  # ... this test point
+    i, j = _within(test, centre, radius * (1 + 1e-9) + 1e-300)     # test point i near face j
     keep = ft.cell[rows[i]] != ft.cell[rows[j]]
     keep &= np.abs(np.einsum("nd,nd->n", normal[i], normal[j])) > 0.5
     i, j = i[keep], j[keep]
@@ -302,6 +296,37 @@ def _check_overlapping_faces(mesh: Mesh, ft: FaceTable) -> None:
         raise MeshError("non-conforming interface (hanging node, split or mismatched faces, "
                         "or unmerged duplicate nodes): faces of "
                         + _fmt_pairs(ft.cell[rows[i[hit]]], ft.cell[rows[j[hit]]]))
+
+
+def _within(points, centres, radii):
+    """(i, j): every point i within radii[j] of centres[j], sorted by j then i.  A grid of cells as
+    wide as the largest radius: each ball is looked for in its cell and the neighbouring ones (numpy
+    only: a k-d tree's import alone costs more than this check on an organ mesh)."""
+    dim = points.shape[1]
+    width = float(radii.max())
+    if not (width > 0 and np.isfinite(width)):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    low = np.minimum(points.min(axis=0), centres.min(axis=0))
+    cell_of = lambda x: np.floor((x - low) / width).astype(np.int64)
+    span = np.maximum(cell_of(points).max(axis=0), cell_of(centres).max(axis=0)) + 3
+    key = lambda c: np.ravel_multi_index(tuple((c + 1).T), tuple(span))   # +1: offsets of -1 stay >= 0
+    order = np.argsort(key(cell_of(points)), kind="stable")
+    sorted_keys = key(cell_of(points))[order]
+    home = cell_of(centres)
+    found_i, found_j = [], []
+    for offset in np.array(np.meshgrid(*[(-1, 0, 1)] * dim, indexing="ij")).reshape(dim, -1).T:
+        k = key(home + offset)
+        lo, hi = np.searchsorted(sorted_keys, k, "left"), np.searchsorted(sorted_keys, k, "right")
+        count = hi - lo
+        j = np.repeat(np.arange(len(centres)), count)
+        start = np.repeat(lo - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+        found_i.append(order[start + np.arange(count.sum())])
+        found_j.append(j)
+    i, j = np.concatenate(found_i), np.concatenate(found_j)
+    close = np.einsum("nd,nd->n", points[i] - centres[j], points[i] - centres[j]) <= radii[j] ** 2
+    i, j = i[close], j[close]
+    by = np.lexsort((i, j))
+    return i[by], j[by]
 
 
 # generic (irrational-looking) interior positions for test points
