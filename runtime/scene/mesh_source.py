@@ -20,7 +20,7 @@ from . import resources
 from ..base.dofs import dofs_per_node as _dofs_per_node
 from ..base.errors import SceneError, TensormassError
 # module attribute lookups, so that tests can stand in for read_mesh and generate_bar
-from ..mesh import bars, checks, io as mesh_io
+from ..mesh import bars, checks, file_cache, io as mesh_io
 from ..mesh.container import CellBlock, Mesh
 from ..mesh.container import MeshError
 from ..mesh.checks import check_coordinates
@@ -60,7 +60,10 @@ def load_mesh(scene):
                 mesh = ball_mesh(spec)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
             elif spec.file is not None or spec.generate in SURFACES:
-                mesh = mesh_io.read_mesh(spec.file) if spec.element != "shell" else shell_mesh(spec)
+                if spec.element == "shell":
+                    mesh = shell_mesh(spec)
+                else:               # read and checked before from the same bytes, or read now
+                    mesh = file_cache.load(spec.file) or mesh_io.read_mesh(spec.file)
                 check_coordinates(mesh.points)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
             else:
@@ -82,12 +85,20 @@ def scene_mesh(scene):
     """The scene's mesh (its cached load_mesh() when it has one), checked (check_mesh)."""
     if hasattr(scene, "load_mesh"):
         mesh = scene.load_mesh()
-        checks.check_mesh(mesh)
+        if not getattr(mesh, "checked", False):         # (file_cache: these bytes passed already)
+            checks.check_mesh(mesh)
+            if _read_from_file(scene.mesh):
+                file_cache.store(scene.mesh.file, mesh)
         return mesh
     return build_mesh(scene.mesh)
 
 
 SURFACES = ("plate", "sphere")         # shell generators (runtime.mesh.surfaces)
+
+
+def _read_from_file(spec) -> bool:
+    """The mesh is a file's cells as read_mesh gives them (what file_cache keeps)."""
+    return spec.file is not None and spec.element != "shell" and spec.generate not in SURFACES + ("ball",)
 
 
 def shell_mesh(spec):

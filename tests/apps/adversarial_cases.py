@@ -1319,8 +1319,9 @@ def _interrupt_cases() -> None:
                ("interrupt_at", "tensormass.runtime.run.output:Writer.mark_stopped", 1)), min_frames=3)
     add("interrupt", "Ctrl-C while reading the scene", "interrupted", ctrl_c,
         hooks=(("interrupt_at", "tensormass.runtime.scene.scene:Scene.from_toml", 1),))
+    # file_cache.load reads the file's bytes first, whether or not an earlier case left its mesh cached
     _mesh_case("Ctrl-C while reading the mesh file", "interrupted", ctrl_c,
-               hooks=(("interrupt_at", "tensormass.runtime.mesh.io:read_mesh", 1),))
+               hooks=(("interrupt_at", "tensormass.runtime.mesh.file_cache:load", 1),))
     CASES[-1] = Case(**{**CASES[-1].__dict__, "family": "interrupt"})
     add("interrupt", "Ctrl-C while loading kernels", "interrupted", ctrl_c, clear_kernels=True,
         hooks=(("interrupt_at", "tensormass.runtime.kernels.kernels:load_kernel", 1),))
