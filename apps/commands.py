@@ -352,7 +352,12 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     rows += _status_rows(data)
     rows.append(("kernels", _fmt_kernels(data.get("kernels", "?"))))
     setup, first, total = t.get("setup"), t.get("first_step"), t.get("total")
-    rows.append(("before 1st step", f"{_fmt_seconds(setup)} (mesh, kernel loading/compilation, constants)"))
+    read = t.get("mesh_read")
+    if isinstance(read, (int, float)) and isinstance(setup, (int, float)):
+        rows.append(("before 1st step", f"{_fmt_seconds(setup + read)} (reading the mesh {_fmt_seconds(read)}; checks, "
+                                        "model, kernel loading/compilation, constants)"))
+    else:
+        rows.append(("before 1st step", f"{_fmt_seconds(setup)} (mesh, kernel loading/compilation, constants)"))
     rows.append(("first step", _fmt_seconds(first)))
     try:
         per_step = (float(total) - float(setup)) / steps if steps else float("nan")

@@ -2,6 +2,7 @@
 
     mesh = load(path)        # the Mesh read and checked before from these very bytes, or None
     store(path, mesh)        # after check_mesh passed on the mesh read_mesh gave for path
+    fingerprint(mesh)        # a digest of what is kept: the caller stores only the mesh as read
 
 Reading a gmsh file costs its ASCII parse twice (msh_check's section check, then meshio's) and
 check_mesh walks every face: most of the time to a run's first step on an organ of a few thousand
@@ -26,7 +27,7 @@ from ..base.files import remove_quietly, write_bytes_atomic
 from .container import CellBlock, Mesh
 from .mesh_groups import Group
 
-__all__ = ["load", "store", "folder"]
+__all__ = ["load", "store", "folder", "fingerprint"]
 
 _CODE = None
 
@@ -46,6 +47,16 @@ def _code_digest() -> str:
                 h.update(source.name.encode() + b"\0" + source.read_bytes())
         _CODE = h.hexdigest()
     return _CODE
+
+
+def fingerprint(mesh: Mesh) -> str:
+    """A digest of what the cache keeps of a mesh (points, cells, tags, groups): tells the mesh read
+    from a file from one changed or put in its place since."""
+    h = hashlib.sha256()
+    for name, array in _pack(mesh).items():
+        h.update(name.encode() + b"\0" + str(array.dtype).encode() + str(array.shape).encode()
+                 + np.ascontiguousarray(array).tobytes())
+    return h.hexdigest()
 
 
 def _entry(path) -> Path | None:

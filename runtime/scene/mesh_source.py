@@ -10,6 +10,8 @@ each cell come from runtime.mesh.regions.  Errors name the scene key (SceneError
 """
 from __future__ import annotations
 
+import time
+
 from types import SimpleNamespace
 
 import numpy as np
@@ -51,6 +53,7 @@ def load_mesh(scene):
     """
     mesh = getattr(scene, "_mesh", None)
     if mesh is None:
+        start = time.perf_counter()
         spec = scene.mesh
         key = "mesh.file" if spec.file is not None else "mesh"
         try:
@@ -63,7 +66,10 @@ def load_mesh(scene):
                 if spec.element == "shell":
                     mesh = shell_mesh(spec)
                 else:               # read and checked before from the same bytes, or read now
-                    mesh = file_cache.load(spec.file) or mesh_io.read_mesh(spec.file)
+                    mesh = file_cache.load(spec.file)
+                    if mesh is None:
+                        mesh = mesh_io.read_mesh(spec.file)
+                        mesh.read_from = (spec.file, file_cache.fingerprint(mesh))
                 check_coordinates(mesh.points)
                 _check_resources(scene, resources.MeshCounts.of_mesh(mesh))
             else:
@@ -72,6 +78,7 @@ def load_mesh(scene):
         except MeshError as exc:
             raise SceneError(f"{key}: {exc}") from None
         scene._mesh = mesh
+        scene._mesh_seconds = time.perf_counter() - start        # reported with the run's setup
     return mesh
 
 
@@ -87,7 +94,7 @@ def scene_mesh(scene):
         mesh = scene.load_mesh()
         if not getattr(mesh, "checked", False):         # (file_cache: these bytes passed already)
             checks.check_mesh(mesh)
-            if _read_from_file(scene.mesh):
+            if _as_read(scene.mesh, mesh):
                 file_cache.store(scene.mesh.file, mesh)
         return mesh
     return build_mesh(scene.mesh)
@@ -96,9 +103,12 @@ def scene_mesh(scene):
 SURFACES = ("plate", "sphere")         # shell generators (runtime.mesh.surfaces)
 
 
-def _read_from_file(spec) -> bool:
-    """The mesh is a file's cells as read_mesh gives them (what file_cache keeps)."""
-    return spec.file is not None and spec.element != "shell" and spec.generate not in SURFACES + ("ball",)
+def _as_read(spec, mesh) -> bool:
+    """Whether the mesh is still the file's cells as read_mesh gave them (what file_cache keeps): not a
+    shell's triangles, nor a mesh a caller put in its place or changed since (a report refining it)."""
+    read = getattr(mesh, "read_from", None)
+    return (spec.element != "shell" and read is not None and read[0] == spec.file
+            and read[1] == file_cache.fingerprint(mesh))
 
 
 def shell_mesh(spec):

@@ -94,3 +94,24 @@ def test_a_cache_that_cannot_be_written_only_means_reading_again(tmp_path, monke
     shutil.copy(FIXTURE, path)
     for _ in range(2):
         assert not getattr(scene_mesh(_scene(path)), "checked", False)
+
+
+def test_only_the_mesh_as_read_is_kept(tmp_path, cache):
+    """A caller that changes the mesh it read, or puts another in its place (report accuracy refines a
+    file's mesh and raises it to tetra10), before the checks: that mesh is checked, not kept under the
+    file's bytes; the next load reads the file again and gives the mesh as read."""
+    path = tmp_path / "mesh.msh"
+    shutil.copy(FIXTURE, path)
+    scene = _scene(path)
+    scene.load_mesh().points[:] *= 2.0                  # changed in place after reading
+    scene_mesh(scene)
+    other = _scene(path)
+    original = other.load_mesh()
+    other._mesh = type(original)(original.points * 3.0, original.blocks, original.groups, original.midpoints)
+    scene_mesh(other)
+    assert not cache.exists() or not list(cache.glob("*.npz"))
+    kept = scene_mesh(_scene(path))                      # as read: kept now, and equal to the file's
+    assert len(list(cache.glob("*.npz"))) == 1
+    _same(kept, file_cache.load(path))
+    _same(kept, Scene.from_dict({"mesh": {"file": str(path)}, "material": [{"law": "hooke", "E": 1, "nu": 0.3}],
+                                 "fixed": [{"region": "side"}]}).load_mesh())
