@@ -187,8 +187,15 @@ def organ_mesh(case: Case, folder: Path | None = None) -> tuple[Path, float]:
 # -- scenes -----------------------------------------------------------------------------------
 def organ_scene_text(case: Case, mesh_file: Path) -> str:
     quadrature = "gauss2" if case.element == "tetra10" else "gauss1"
+    solver = {"kind": case.kind, "steps": case.steps, "dt": DT, "newton_tolerance": NEWTON_TOLERANCE, **dict(case.solver)}
+    return organ_text(case.name, mesh_file, quadrature, solver)
+
+
+def organ_text(name: str, mesh_file, quadrature: str, solver: dict) -> str:
+    """The organ scene (the material, clamp and loads of examples/organ/scene.toml) on a mesh file of
+    the organ, with these [solver] keys (also the scene of `report accuracy --benchmark dynamics`)."""
     return f"""
-name = "{case.name}"
+name = "{name}"
 [mesh]
 file = {json.dumps(str(mesh_file))}
 [[material]]
@@ -206,11 +213,7 @@ gravity = {list(GRAVITY)}
 region = "loaded"
 value = {list(TRACTION)}
 [solver]
-kind = "{case.kind}"
-steps = {case.steps}
-dt = {DT}
-newton_tolerance = {NEWTON_TOLERANCE}
-""" + "".join(f"{k} = {_toml(v)}\n" for k, v in case.solver)
+""" + "".join(f"{k} = {_toml(v)}\n" for k, v in solver.items())
 
 
 def _toml(v) -> str:

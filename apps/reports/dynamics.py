@@ -86,42 +86,13 @@ def _meshes(quick, progress) -> list:
 
 
 def scene_text(mesh_file, quadrature, solver: dict, dt: float, steps: int) -> str:
-    """The organ under gravity and traction, with these [solver] keys."""
-    from ..bench_organ import DENSITY, E, GRAVITY, NU, TRACTION
-    keys = {"kind": "implicit_euler", **solver, "dt": dt, "steps": steps}
-    lines = "\n".join(f"{k} = {_toml(v)}" for k, v in keys.items())
-    return f"""
-name = "dynamics"
-[mesh]
-file = {_toml(str(mesh_file))}
-[[material]]
-region = "organ"
-law = "neohookean"
-quadrature = "{quadrature}"
-E = {E}
-nu = {NU}
-density = {DENSITY}
-[[fixed]]
-region = "attached"
-[loads]
-gravity = {list(GRAVITY)}
-[[loads.traction]]
-region = "loaded"
-value = {list(TRACTION)}
-[solver]
-{lines}
-[[probe]]
+    """The organ under gravity and traction (bench organ's scene), with these [solver] keys."""
+    from ..bench_organ import organ_text
+    text = organ_text("dynamics", mesh_file, quadrature, {"kind": "implicit_euler", **solver, "dt": dt, "steps": steps})
+    return text + f"""[[probe]]
 name = "pole"
 point = {list(_pole(mesh_file))}
 """
-
-
-def _toml(v) -> str:
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, float) and math.isinf(v):
-        return "inf"
-    return repr(v)
 
 
 def _pole(mesh_file) -> tuple:
