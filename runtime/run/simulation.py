@@ -665,8 +665,8 @@ class Simulation:
             contact=None if getattr(model, "contact", None) is None else model.contact.summary())
 
     def _budget(self) -> dict:
-        """{"budget": what the budgeted step kept and its measured step error} (runtime.physics.integrators.
-        StepBudget), or nothing when every step is exact."""
+        """{"budget": what the budgeted step kept and its estimated trajectory error} (runtime.physics.
+        integrators.StepBudget), or nothing when every step is exact."""
         budget = getattr(getattr(self, "integrator", None), "budget", None)
         return {} if budget is None else {"budget": budget.summary()}
 
