@@ -25,6 +25,7 @@ gmsh into the user cache; quick (and without gmsh), the small tetra organ commit
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from pathlib import Path
@@ -95,8 +96,10 @@ point = {list(_pole(mesh_file))}
 """
 
 
+@functools.lru_cache(maxsize=8)
 def _pole(mesh_file) -> tuple:
-    """The organ's top pole (the highest mesh point, on the axis): where the probe reads."""
+    """The organ's top pole (the highest mesh point, on the axis): where the probe reads (read once
+    per mesh file: every setting's scene asks)."""
     import meshio
     z = float(np.asarray(meshio.read(mesh_file).points)[:, 2].max())
     return (0.0, 0.0, z)

@@ -224,7 +224,7 @@ class ImplicitEuler(_Dynamic):
         s = self.model.solver
         every = int(getattr(s, "stiffness_every", 1))
         self.budget = StepBudget(every, float(getattr(s, "stiffness_tolerance", np.inf))) if every > 1 else None
-        self._kept = None                   # (h, K, A, diagonal of A) of the last assembly (budgeted step)
+        self._kept = None                   # (h, K, A, A's diagonal on the free dofs) of the last assembly
         self._previous = None               # (forces, h) of the last step (budgeted step)
 
     def step(self, k: int) -> dict:
@@ -298,10 +298,9 @@ class ImplicitEuler(_Dynamic):
         previous, budget = self._previous, self.budget
         if previous is None or previous[1] != h or budget.speed <= 0:
             return 0.0
-        diagonal = self._kept[3]
-        d = f_int - previous[0] + h * Kv
         free = self.model.free_dofs
-        return h * float(np.abs(d[free] / diagonal[free]).max()) / budget.speed
+        d = f_int - previous[0] + h * Kv
+        return h * float(np.abs(d[free] / self._kept[3]).max()) / budget.speed
 
     def _linearisation(self, u, v, h):
         """(f_int, K, A, stale, Kv): the forces at u, the stiffness and the step's matrix A = M' + (h beta + h^2) K
@@ -311,9 +310,9 @@ class ImplicitEuler(_Dynamic):
         if kept is not None and kept[0] == h:
             f_int = ctx.asm.forces(u)
             Kv = ctx.asm.matrix(kept[1]) @ v
-            drift = self._drift(f_int, Kv, h)
+            keep = budget.keeps(self._drift(f_int, Kv, h))
             self._previous = (f_int, h)
-            if budget.keeps(drift):
+            if keep:
                 return f_int, kept[1], kept[2], None, Kv
             K = ctx.asm.stiffness(u, ctx.project is True)
         else:
@@ -324,10 +323,10 @@ class ImplicitEuler(_Dynamic):
             self.model.pressure.add_stiffness(A, ctx.asm.pattern, u, h * h)
         if budget is None:
             return f_int, K, A, None, None
-        self._previous = (f_int, h)
+        self._previous = (f_int, h)             # what the next step's drift compares its forces with
         K = K.copy()                        # the assembler's output array goes back to its pool
         K.flags.writeable = A.flags.writeable = False       # kept: the solver may keep what it built of A
-        self._kept = (h, K, A, ctx.asm.matrix(A).diagonal())
+        self._kept = (h, K, A, ctx.asm.matrix(A).diagonal()[self.model.free_dofs])
         same = kept is not None and kept[0] == h
         return f_int, K, A, (kept[1], kept[2]) if same else (None, None), None
 

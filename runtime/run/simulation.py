@@ -339,7 +339,6 @@ class Simulation:
     def _run(self) -> Summary:
         start = time.perf_counter()
         self._step = 0
-        self._budget_warned = False
         self._history = _History()
         stopped = None
         try:
@@ -674,9 +673,8 @@ class Simulation:
         """A warning at the last step when the budgeted step's estimated trajectory error, over the run's
         largest displacement, passes STEP_ERROR_WARNING."""
         budget = getattr(self.integrator, "budget", None)
-        if budget is None or budget.error <= STEP_ERROR_WARNING or self._budget_warned:
+        if budget is None or budget.error <= STEP_ERROR_WARNING:
             return
-        self._budget_warned = True
         self.monitor.warn(k, t, "budget",
                           f"keeping K between steps moved the trajectory by an estimated {100 * budget.error:.2g} % of "
                           f"the largest displacement against exact steps (above {100 * STEP_ERROR_WARNING:g} %): lower "

@@ -212,12 +212,12 @@ KEYS = (
             "docs/guide/interactive.md)."),
     Key("solver", "stiffness_every", "integer", 1,
         doc="implicit_euler: K, the step's matrix and its factor kept for up to N steps; the steps between take "
-            "fresh forces with the kept matrix. The summary gives the step error this costs."),
+            "fresh forces with the kept matrix. The summary estimates the trajectory error this costs."),
     Key("solver", "stiffness_tolerance", "number", 5e-3, "1",
         doc="With stiffness_every > 1: K is assembled sooner when a step's velocity error, estimated from the "
             "forces, passes this share of the largest speed (inf: every N steps only)."),
     Key("solver", "factor_tolerance", "number", 1e-10, "1",
-        doc="Relative residual a PARDISO factor's solve (fresh or kept) is refined to."),
+        doc="Relative residual a factor's solve is refined to: a fresh PARDISO factor, or a kept band or PARDISO one."),
     Key("solver", "newton_tolerance", "number", 1e-8, "1", doc="Newton's relative residual."),
     Key("solver", "newton_max_iterations", "integer", 25, doc="Newton iterations per step at most."),
     Key("solver", "rayleigh", "array of 2 numbers", (0.0, 0.0), "1/s, s",

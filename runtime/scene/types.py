@@ -95,7 +95,7 @@ class Solver:
     mode: str = "exact"                   # exact | interactive (a preset of the two keys below)
     stiffness_every: int = 1              # implicit_euler: K (and the step's factor) kept for N steps at most
     stiffness_tolerance: float = 5e-3     # ... and while the step error estimated from the forces stays below
-    factor_tolerance: float = 1e-10       # relative residual a PARDISO factor's solve is refined to
+    factor_tolerance: float = 1e-10       # relative residual a factor's solve is refined to
     newton_tolerance: float = 1e-8        # relative residual
     newton_max_iterations: int = 25
     rayleigh: tuple = (0.0, 0.0)          # alpha (mass), beta (stiffness)

@@ -223,8 +223,8 @@ class LinearSolver:
 
     reuse: keep the band / PARDISO factor (and the multigrid hierarchy) for the next
     matrix of the same pattern (see the module docstring).
-    factor_tol: the relative residual a PARDISO factor's solve, fresh or kept, is refined to by CG
-    (DIRECT_TOL; a budgeted step takes less: solver.factor_tolerance).
+    factor_tol: the relative residual CG refines a factor's solve to: a fresh PARDISO factor, or a kept
+    band or PARDISO factor (DIRECT_TOL; a budgeted step takes less: solver.factor_tolerance).
     near_nullspace: (n, k) rigid-body modes of the unknowns for multigrid (set by
     ConstrainedSystem), or None.
     time: seconds spent in solve, reported only (no decision reads it).
@@ -239,7 +239,7 @@ class LinearSolver:
         if method == "pardiso" and not pardiso.available():
             raise TensormassError(f"linear solver 'pardiso' is unavailable: {pardiso.unavailable_reason()}")
         self.method, self.tol, self.max_iterations = method, float(tol), int(max_iterations)
-        self.factor_tol = float(factor_tol)      # relative residual a PARDISO or kept factor's solve is refined to
+        self.factor_tol = float(factor_tol)      # relative residual a factor's solve is refined to
         self.preconditioner = preconditioner
         self.converged = True
         self.time = 0.0                          # statistics only: never an input to a decision
