@@ -11,6 +11,7 @@ thesis' Algorithm 3: the per-step code then reads only D and u):
 from __future__ import annotations
 
 import sympy as sp
+from sympy.functions.elementary.piecewise import ExprCondPair
 
 
 def geometry_code(dim: int):
@@ -51,7 +52,8 @@ def hoist(exprs: list[sp.Expr], rest: set[sp.Symbol], prefix: str = "c"):
         return table[e]
 
     def is_rest(e: sp.Expr) -> bool:
-        return e.free_symbols <= rest
+        # a value only: not a Piecewise branch (expression, condition) nor a condition
+        return isinstance(e, sp.Expr) and not isinstance(e, ExprCondPair) and e.free_symbols <= rest
 
     def visit(e: sp.Expr) -> sp.Expr:
         if e.is_Atom:

@@ -37,7 +37,7 @@ def law_derivatives(law, dim: int) -> LawDerivatives:
     flat = [F[a][b] for a in range(dim) for b in range(dim)]
     params = law.symbols()
     F3 = embed_plane_strain(F)
-    W = law.energy(F3, **params)
+    W = law.W(F3, params)
     P = [sp.diff(W, s) for s in flat]
     # The Hessian is symmetric: differentiate each pair once.
     A = {(i, j): sp.diff(P[i], flat[j]) for i in range(len(flat)) for j in range(i, len(flat))}
@@ -49,11 +49,11 @@ def law_derivatives(law, dim: int) -> LawDerivatives:
         F33 = sp.Symbol("F22", real=True)
         F3_free = F3.copy()
         F3_free[2, 2] = F33
-        P33 = sp.diff(law.energy(F3_free, **params), F33).subs(F33, 1)
+        P33 = sp.diff(law.W(F3_free, params), F33).subs(F33, 1)
     return LawDerivatives(
         dim=dim,
         F=tuple(tuple(row) for row in F),
-        params=tuple(params[p] for p in law.parameters),
+        params=tuple(params[p] for p in law.inputs),
         J=F3.det(),
         W=W,
         P=tuple(tuple(P[a * dim:(a + 1) * dim]) for a in range(dim)),

@@ -33,7 +33,24 @@ def eliminate(outputs: list[tuple[str, sp.Expr]], prefix: str) -> Fragment:
     names = [n for n, _ in outputs]
     temps, reduced = sp.cse([e for _, e in outputs], symbols=sp.numbered_symbols(prefix, real=True),
                             order="canonical")
+    temps, reduced = _inline_conditions(temps, reduced)
     return Fragment(tuple(temps), tuple(zip(names, reduced)))
+
+
+def _inline_conditions(temps, reduced):
+    """Put the conditions of Piecewise values (E > 0) back where they are used: every temporary
+    holds a number (the vector code's temporaries are vectors of doubles, never of truth values)."""
+    conditions = {}
+    kept = []
+    for symbol, value in temps:
+        value = value.xreplace(conditions) if conditions else value
+        if isinstance(value, sp.logic.boolalg.Boolean):
+            conditions[symbol] = value
+        else:
+            kept.append((symbol, value))
+    if not conditions:
+        return temps, reduced
+    return kept, [e.xreplace(conditions) for e in reduced]
 
 
 def split(outputs: list[tuple[str, sp.Expr]], prefix: str, max_ops: int = DEFAULT_MAX_OPS) -> list[Fragment]:

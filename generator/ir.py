@@ -57,7 +57,7 @@ def law_degree(law) -> int | None:
     run whose kernels are cached must not differentiate the law (seconds of sympy for Yeoh)."""
     F = F_symbols(3)
     flat = [s for row in F for s in row]
-    W = law.energy(sp.Matrix(F), **law.symbols())
+    W = law.W(sp.Matrix(F))
     if not W.is_polynomial(*flat):            # checked before expanding: ln J, J^(-2/3) are slow to expand
         return None
     return sp.Poly(sp.expand(W), *flat).total_degree()
@@ -110,7 +110,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         name=f"{element_name}_{law_name}_{quadrature}" + ("_recompute" if recompute else ""),
         element=element_name, law=law_name, quadrature=quadrature,
         dim=dim, n_nodes=n, n_points=rule.n_points,
-        parameters=tuple(law.parameters),
+        parameters=tuple(law.inputs),
         requires_positive_J=law.requires_positive_J,
         quadratic_energy=law_name in laws_pkg.names() and laws_pkg.is_quadratic(law_name),
         affine_edges=midside_triples(ref) if quadrature == EXACT else (),

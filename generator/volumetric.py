@@ -57,7 +57,7 @@ def split(law_name: str) -> VolumetricSplit:
     law = laws_pkg.get(law_name)
     params = law.symbols()
     F = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"F{i}{j}", real=True))
-    W = law.energy(F, **params)
+    W = law.W(F, params)
     rng = random.Random(15)
     samples = [_random_F(rng) for _ in range(3)]
     values = {s: sp.Rational(7 + 3 * k, 5) for k, s in enumerate(params.values())}
@@ -107,7 +107,7 @@ def module_text(law_names=None) -> str:
     for name in names:
         s = split(name)
         law = laws_pkg.get(name)
-        args = ", ".join(["theta"] + list(law.parameters))
+        args = ", ".join(["theta"] + list(law.inputs))
         U, dU, d2U = s.derivatives()
         lines += ["", "", f"def {name}({args}):",
                   f'    """{law.description}: U(theta) = {sp.sstr(U)}, theta: {s.measure}."""']

@@ -127,7 +127,7 @@ def load_file(path) -> Law:
         raise LawError(f"law file {given}: law {name!r} is a built-in law of tensormass; give the law in "
                        "this file another name (LAW = Law(name=...))")
     own = ("E", "nu") if law.kind != "continuum" else ()     # a spring law's parameters are E and nu
-    clash = [p for p in law.parameters if p not in own and (not isinstance(p, str) or not p.isidentifier()
+    clash = [p for p in law.inputs if p not in own and (not isinstance(p, str) or not p.isidentifier()
                                                             or p in _reserved() or _TEMPORARY.fullmatch(p))]
     if clash:
         raise LawError(f"law file {given}: parameter {clash[0]!r} of law {name!r} is a name the generated kernels "
@@ -269,7 +269,7 @@ def is_quadratic(name: str) -> bool:
     if law.kind != "continuum":
         return False
     H = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"H{i}{j}", real=True))
-    W = law.energy(sp.eye(3) + H, **law.symbols())
+    W = law.W(sp.eye(3) + H)
     entries = list(H)
     if not W.is_polynomial(*entries):          # checked before expanding: ln J, J^(-2/3) are slow to expand
         return False

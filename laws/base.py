@@ -19,8 +19,14 @@ class Law:
 
     energy(F, **params) receives a 3x3 sympy Matrix F (2D elements embed their
     2x2 gradient with F33 = 1: plane strain) and sympy symbols named after
-    ``parameters``; it returns the energy density per unit rest volume.
+    ``parameters`` and ``options``, and for each name of ``directions`` a 3x1 sympy Matrix of
+    symbols (a unit vector in the rest configuration: a fibre family); it returns the energy
+    density per unit rest volume.
     from_E_nu(E, nu) returns the native parameters as a dict (numpy-friendly).
+    options: ((name, default, (low, high)), ...): parameters always given by name, never derived
+    from E and nu (a fibre stiffness); default None: required.
+    directions: names of unit vectors given per cell by the scene ([[material]] fibres); the
+    kernels receive their components as inputs named NAME_x, NAME_y, NAME_z.
     """
 
     name: str
@@ -31,13 +37,49 @@ class Law:
     validity: str
     # Laws with ln J or J^(-2/3) are undefined for det F <= 0: kernels flag those elements.
     requires_positive_J: bool = False
+    options: tuple = ()
+    directions: tuple = ()
     kind = "continuum"               # an energy density W(F); DiscreteLaw: an element energy in nodal positions
 
-    def symbols(self) -> dict[str, sp.Symbol]:
-        return {p: sp.Symbol(p, real=True) for p in self.parameters}
+    @property
+    def option_names(self) -> tuple[str, ...]:
+        return tuple(name for name, _, _ in self.options)
 
-    def native_parameters(self, E=None, nu=None, **native) -> dict[str, np.ndarray]:
-        """Native parameters from either (E, nu) or the native names, validated."""
+    @property
+    def direction_components(self) -> tuple[str, ...]:
+        return tuple(f"{d}_{c}" for d in self.directions for c in "xyz")
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """What the constants kernel receives, in order: parameters, options, direction components."""
+        return tuple(self.parameters) + self.option_names + self.direction_components
+
+    def symbols(self) -> dict[str, sp.Symbol]:
+        return {p: sp.Symbol(p, real=True) for p in self.inputs}
+
+    def W(self, F, symbols: dict | None = None):
+        """The energy density at F with the input symbols (default: symbols()); the direction
+        components are passed as the 3x1 vectors energy() receives."""
+        symbols = self.symbols() if symbols is None else symbols
+        scalars = {p: symbols[p] for p in tuple(self.parameters) + self.option_names}
+        vectors = {d: sp.Matrix([symbols[f"{d}_{c}"] for c in "xyz"]) for d in self.directions}
+        return self.energy(F, **scalars, **vectors)
+
+    def native_parameters(self, E=None, nu=None, **given) -> dict[str, np.ndarray]:
+        """Native parameters from either (E, nu) or the native names, validated; the options (their
+        defaults where not given) and the direction components given."""
+        options = {k: given.pop(k) for k in list(given) if k in self.option_names}
+        directions = {k: given.pop(k) for k in list(given) if k in self.direction_components}
+        out = self._native(E, nu, given)
+        out.update(_options(self, options))
+        for k, v in directions.items():
+            value = np.asarray(v, dtype=float)
+            if not np.all(np.isfinite(value)):
+                raise LawError(f"law {self.name!r}: direction component {k} is not finite")
+            out[k] = value
+        return out
+
+    def _native(self, E, nu, native) -> dict[str, np.ndarray]:
         if native and (E is not None or nu is not None):
             raise LawError(f"law {self.name!r}: give either E and nu or native parameters, not both")
         if not native and self.parameters:
@@ -47,7 +89,8 @@ class Law:
         unknown = sorted(set(native) - set(self.parameters))
         missing = [p for p in self.parameters if p not in native]
         if unknown:
-            raise LawError(f"law {self.name!r} has no parameter {', '.join(unknown)}; it takes {', '.join(self.parameters)}")
+            takes = ", ".join(tuple(self.parameters) + self.option_names)
+            raise LawError(f"law {self.name!r} has no parameter {', '.join(unknown)}; it takes {takes}")
         if missing:
             raise LawError(f"law {self.name!r} is missing parameter {', '.join(missing)}")
         out = {}
@@ -57,6 +100,20 @@ class Law:
                 raise LawError(f"law {self.name!r}: parameter {p} is not finite")
             out[p] = value
         return out
+
+
+def _options(law, given: dict) -> dict[str, np.ndarray]:
+    """A law's options: given or their default, each a finite number in its bounds."""
+    out = {}
+    for name, default, (low, high) in law.options:
+        if name not in given and default is None:
+            raise LawError(f"law {law.name!r} needs parameter {name} (a number in [{low:g}, {high:g}])")
+        value = np.asarray(given.get(name, default), dtype=float)
+        if not np.all(np.isfinite(value)) or np.any(value < low) or np.any(value > high):
+            raise LawError(f"law {law.name!r}: parameter {name} must be a number in [{low:g}, {high:g}], "
+                           f"got {given.get(name)!r}")
+        out[name] = value
+    return out
 
 
 def validate_E_nu(E, nu):
@@ -112,6 +169,11 @@ class DiscreteLaw(Law):
     elements: tuple = ()
     options: tuple = ()              # ((name, default, (low, high)), ...): parameters beyond E and nu
     kind = "discrete"
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """What the constants kernel receives: `parameters` (E, nu and the options among them)."""
+        return tuple(self.parameters)
 
     def native_parameters(self, E=None, nu=None, **options) -> dict[str, np.ndarray]:
         """E and nu (validated) and the options (their defaults where not given)."""

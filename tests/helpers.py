@@ -9,7 +9,7 @@ from tensormass.generator.elements import element as reference
 from tensormass.runtime.base.samples import random_elements
 
 __all__ = ["random_elements", "reference_nodes", "fd_gradient", "relative_error", "FULL_CATALOGUE",
-           "catalogue_selection", "QUICK_KERNELS", "QUICK_NUMBA_KERNELS", "quick"]
+           "catalogue_selection", "QUICK_KERNELS", "QUICK_NUMBA_KERNELS", "quick", "law_inputs"]
 
 # The checks that run over the catalogue (finite differences, patch tests, C = numba, ...) take a
 # sample covering every element type, law and quadrature; CI's catalogue step sets
@@ -34,7 +34,8 @@ QUICK_KERNELS = frozenset(
     + [f"{e}_measure_{m}_gauss2" for e in _ELEMENTS for m in ("volume", "dilatation", "green_dilatation")]
     + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")]
     + ["triangle_measure_volume_gauss1"]         # the one-point triangle mooney_rivlin's nodal pressure
-    + ["tetra_mss_discrete", "triangle_mss_discrete"])          # the lattice laws on their cheap elements
+    + ["tetra_mss_discrete", "triangle_mss_discrete"]           # the lattice laws on their cheap elements
+    + ["tetra_hgo_gauss1"])                                     # fibres: the cheapest of their kernels
 # Generated numba modules (5 to 30 s of numba compile each, cold): the tests about numba itself
 # (C = numba, the numba backend's own behaviour, the benchmarks that time both backends) load
 # these; every other test runs the default backend (C).
@@ -109,7 +110,25 @@ def random_cubes(n: int, seed: int = 0, edge=(0.3, 2.0)) -> np.ndarray:
 def catalogue_parameters(law: str) -> dict:
     """Material parameters every catalogue entry of `law` accepts (a shell needs its thickness)."""
     from tensormass import laws
-    return {"E": 2.0, "nu": 0.3, **({"thickness": 0.1} if laws.is_shell(law) else {})}
+    return {"E": 2.0, "nu": 0.3, **({"thickness": 0.1} if laws.is_shell(law) else {}), **law_inputs(law)}
+
+
+# A fibre direction in the plane z = 0 (2D elements take in-plane fibres) whose squared length is 1
+# in floating point: at rest the fibre strain is then exactly 0 and the fibres carry nothing.
+FIBRE = (0.6, 0.8, 0.0)
+
+
+def law_inputs(law: str) -> dict:
+    """What a law takes beyond E and nu for the kernel checks: its options (fibre stiffness k1 of
+    the order of E, k2, a dispersion that involves every term) and its directions (FIBRE)."""
+    from tensormass import laws
+    the_law = laws.kernel_law(law)
+    if the_law.kind != "continuum":
+        return {}
+    values = {"k1": 2.0, "k2": 1.5, "dispersion": 0.1}
+    out = {name: values.get(name, default) for name, default, _ in the_law.options}
+    out.update({f"{d}_{c}": x for d in the_law.directions for c, x in zip("xyz", FIBRE)})
+    return out
 
 
 def catalogue_elements(element: str, law: str, quadrature: str, n: int, seed: int = 0) -> np.ndarray:

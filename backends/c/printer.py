@@ -48,6 +48,17 @@ class CVectorPrinter(CPrinter):
         text = super().doprint(expr, assign_to)
         return f"TM_SPLAT({text})" if getattr(expr, "is_Number", False) else text
 
+    def _print_Piecewise(self, expr):
+        """A lane-wise select (a GNU statement expression): both values are computed, each lane keeps
+        the one its condition picks (a value the other lanes' condition rules out is never used)."""
+        (value, condition), (otherwise, last) = expr.args if len(expr.args) == 2 else (None, None)
+        if last is not sp.true or not isinstance(condition, sp.core.relational.Relational):
+            raise ValueError(f"the vector code selects between two values on one comparison, not {expr}")
+        return (f"({{ const tm_vd tm_s = {self._print(condition.lhs - condition.rhs)}, "
+                f"tm_a = {self.doprint(value)}, tm_b = {self.doprint(otherwise)}; tm_vd tm_r; "
+                f"for (int tm_l = 0; tm_l < TM_W; ++tm_l) tm_r[tm_l] = tm_s[tm_l] {condition.rel_op} 0.0 "
+                "? tm_a[tm_l] : tm_b[tm_l]; tm_r; })")
+
     def _print_Pow(self, expr, rational=False):
         base, exp = expr.as_base_exp()
         if exp.is_Integer and 2 <= abs(int(exp)) <= 4 and not base.is_Symbol:

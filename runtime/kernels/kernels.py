@@ -99,7 +99,12 @@ class Kernel:
         return X
 
     def _params(self, n: int, E, nu, native) -> np.ndarray:
-        values = laws.kernel_law(self.law).native_parameters(E=E, nu=nu, **native)
+        law = laws.kernel_law(self.law)
+        values = law.native_parameters(E=E, nu=nu, **native)
+        missing = [d for d in law.directions if any(f"{d}_{c}" not in values for c in "xyz")]
+        if missing:
+            raise TensormassError(f"law {self.law!r} needs its fibre direction {missing[0]!r}: give "
+                                  f"{', '.join(f'{missing[0]}_{c}' for c in 'xyz')} (a scene: [[material]] fibres)")
         table = np.empty((n, len(self.parameters)))
         for k, p in enumerate(self.parameters):
             try:

@@ -21,6 +21,7 @@ import numpy as np
 from ... import elements as _element_types
 from ... import laws
 from ..kernels import custom_kernels as _custom
+from ..mesh import fibres as _fibres
 from ..kernels import kernels as _kernels
 from ..scene import resources
 from ..base.dofs import dofs_per_node as _dofs_per_node
@@ -360,7 +361,7 @@ class Model:
     def _parameters(self, law: str, members) -> dict:
         """Native law parameters, one value per cell (materials may differ within a part)."""
         columns: dict = {}
-        for _, ids, m in members:
+        for b, ids, m in members:
             mat = self.materials[m]
             try:
                 if law == mat.law:
@@ -369,9 +370,27 @@ class Model:
                     values = switch_parameters(mat, law)
             except (laws.LawError, TensormassError) as exc:
                 raise TensormassError(f"material {m} ({law}): {exc}") from None
+            values.update(self._fibre_inputs(law, mat, m, b, ids))
             for p, v in values.items():
                 columns.setdefault(p, []).append(np.broadcast_to(v, (len(ids),)))
         return {p: np.concatenate(v) for p, v in columns.items()}
+
+    def _fibre_inputs(self, law: str, mat, m: int, block: int, ids) -> dict:
+        """The direction components a law with fibres receives (runtime.mesh.fibres), per cell."""
+        names = laws.get(law).directions
+        if not names:
+            return {}
+        entries = getattr(mat, "fibres", None) or ()
+        if len(entries) != len(names):
+            raise TensormassError(f"material {m} ({law}): needs {len(names)} fibre direction(s) "
+                                  f"({', '.join(names)}): [[material]] fibres")
+        cells = self.mesh.blocks[block].cells[ids]
+        centroids = self.mesh.points[cells].mean(axis=1)
+        out = {}
+        for name, entry in zip(names, entries):
+            a = _fibres.directions(entry, centroids, f"material[{m}].fibres ({name})")
+            out.update({f"{name}_{c}": a[:, k] for k, c in enumerate("xyz")})
+        return out
 
     def _constants(self, kernel, cells, cell_ids, params) -> np.ndarray:
         try:

@@ -150,6 +150,9 @@ KEYS = (
     Key("material", "density", "number", 1000.0, "kg/m^3", doc="Mass density, > 0."),
     Key("material", "formulation", "string", "displacement", choices="runtime.physics.formulations:FORMULATIONS",
         doc="How the law's volumetric part is integrated (see Materials and formulations)."),
+    Key("material", "fibres", "array or string", unit="1",
+        doc="A law with fibre directions (hgo): one per direction, a vector [1, 0, 0] or \"FILE.py:FUNCTION\" "
+        "(a function of the cells' rest centroids, (n, dim), returning (n, 3)); normalised per cell."),
     # -- [[fixed]] -------------------------------------------------------------------------------
     Key("fixed", "box", _BOX, unit="m", doc="The nodes inside the box; box or region (or both) is required."),
     Key("fixed", "region", _REGION, doc="The nodes of a mesh group (name or id)."),

@@ -9,7 +9,8 @@ from ... import elements as _element_types
 from ... import laws
 from ...backends import BACKENDS
 from ..kernels import catalogue
-from ..base.errors import SceneError
+from ..base.errors import SceneError, TensormassError
+from ..mesh import fibres as _fibres
 from ..base import integrator_kinds
 from ..base.paths import scene_path
 from ..mesh.bars import BAR_ELEMENTS
@@ -36,7 +37,7 @@ TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
 _REFINE = ("time", "step", "box", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
-_MATERIAL = ("region", "box", "law", "law_file", "quadrature", "E", "nu", "density", "formulation")
+_MATERIAL = ("region", "box", "law", "law_file", "quadrature", "E", "nu", "density", "formulation", "fibres")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
 _LOADS = ("gravity", "force", "traction", "moment", "pressure", "gravity_amplitude")
@@ -308,8 +309,10 @@ class Parser(ValueParser):
                 raise SceneError(f"{key}.{missing}: missing (E and nu go together)")
             E = self.number(t["E"], f"{key}.E")
             nu = self.number(t["nu"], f"{key}.nu")
+        options = {o: self.number(t[o], f"{key}.{o}") for o in law.option_names if o in t}
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
-                       params=native, density=density, formulation=formulation, law_file=law_file)
+                       params={**native, **options}, density=density, formulation=formulation,
+                       law_file=law_file, fibres=self.fibres(t, key, law))
         try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:
@@ -318,6 +321,28 @@ class Parser(ValueParser):
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
         return mat
+
+    def fibres(self, t, key, law) -> tuple | None:
+        """A [[material]]'s fibres: one entry per direction of its law (runtime.mesh.fibres)."""
+        count = len(law.directions)
+        if "fibres" not in t:
+            if count:
+                raise SceneError(f"{key}.fibres: missing; law {law.name!r} needs {count} fibre direction"
+                                 f"{'s' if count > 1 else ''} per cell: a vector such as [1, 0, 0], or "
+                                 "\"FILE.py:FUNCTION\" (a function of the cells' centroids)")
+            return None
+        if not count:
+            raise SceneError(f"{key}.fibres: law {law.name!r} has no fibre directions; remove fibres")
+        raw = t["fibres"]
+        nested = isinstance(raw, list) and raw and all(isinstance(r, (list, str)) for r in raw)
+        entries = raw if nested else [raw]
+        if len(entries) != count:
+            raise SceneError(f"{key}.fibres: law {law.name!r} has {count} fibre direction"
+                             f"{'s' if count > 1 else ''} ({', '.join(law.directions)}), got {len(entries)}")
+        try:
+            return tuple(_fibres.parse_entry(e, f"{key}.fibres", self.base_dir) for e in entries)
+        except TensormassError as exc:
+            raise SceneError(str(exc)) from None
 
     def law_file(self, t, key) -> tuple:
         """A [[material]]'s law_file: a law file outside the package (relative to the scene file),

@@ -17,7 +17,7 @@ from tensormass import laws
 from tensormass.generator.catalogue import entries
 from tensormass.generator.derivatives import law_derivatives
 
-from helpers import FULL_CATALOGUE, QUICK_KERNELS, QUICK_NUMBA_KERNELS, catalogue_selection, fd_gradient, random_elements, reference_nodes, relative_error
+from helpers import FULL_CATALOGUE, QUICK_KERNELS, QUICK_NUMBA_KERNELS, catalogue_selection, fd_gradient, law_inputs, random_elements, reference_nodes, relative_error
 
 pytestmark = pytest.mark.catalogue
 
@@ -27,10 +27,10 @@ pytestmark = pytest.mark.catalogue
 CONTINUUM = entries(law_names=laws.continuum_names(user=False))
 SAMPLE = {"tetra_stable_neohookean_gauss1", "triangle_mooney_rivlin_gauss1", "tetra10_stvk_gauss2",
           "hexahedron_neohookean_gauss2", "wedge_hooke_gauss2", "pyramid_stvk_gauss2", "triangle6_stvk_exact",
-          "quad_hooke_gauss3"}
+          "quad_hooke_gauss3", "tetra_hgo_gauss1"}
 CATALOGUE = catalogue_selection(CONTINUUM, SAMPLE)
 IDS = [e.name for e in CATALOGUE]
-FINITE_STRAIN = ["stvk", "neohookean", "stable_neohookean", "mooney_rivlin"]
+FINITE_STRAIN = ["stvk", "neohookean", "stable_neohookean", "mooney_rivlin", "hgo"]
 E, NU = 3.0, 0.3
 
 
@@ -70,15 +70,15 @@ def law_energy_density(law_name, dim):
     d = law_derivatives(laws.get(law_name), dim)
     flat = [s for row in d.F for s in row]
     fn = sp.lambdify(flat + list(d.params), d.W, "math")
-    params = laws.get(law_name).native_parameters(E=E, nu=NU)
-    return lambda F: fn(*np.ravel(F), *[float(params[p]) for p in laws.get(law_name).parameters])
+    params = laws.get(law_name).native_parameters(E=E, nu=NU, **law_inputs(law_name))
+    return lambda F: fn(*np.ravel(F), *[float(params[p]) for p in laws.get(law_name).inputs])
 
 
 @pytest.mark.parametrize("entry", CATALOGUE, ids=IDS)
 def test_forces_and_stiffness_match_finite_differences(entry):
     k = kernel(entry)
     X = random_elements(entry.element, 4, seed=7, straight=entry.quadrature == "exact")
-    D = k.constants(X, E=E, nu=NU)
+    D = k.constants(X, E=E, nu=NU, **law_inputs(entry.law))
     u = 0.04 * np.random.default_rng(3).standard_normal((len(X), k.n_dofs))
     f, K = k.forces_and_stiffness(D, u)
     h = 1e-6
@@ -124,7 +124,7 @@ def test_constant_strain_patch(entry):
     """A linear displacement field gives constant F: W_E = W(F) x volume, exactly."""
     k = kernel(entry)
     X = affine_elements(entry.element, 3, seed=11)
-    D = k.constants(X, E=E, nu=NU)
+    D = k.constants(X, E=E, nu=NU, **law_inputs(entry.law))
     rng = np.random.default_rng(5)
     H = 0.05 * rng.standard_normal((k.dim, k.dim))
     u = np.einsum("ab,enb->ena", H, X) + rng.standard_normal(k.dim)
@@ -141,7 +141,7 @@ def test_constant_strain_patch(entry):
 def test_rigid_motions(entry):
     k = kernel(entry)
     X = random_elements(entry.element, 3, seed=2, straight=entry.quadrature == "exact")
-    D = k.constants(X, E=E, nu=NU)
+    D = k.constants(X, E=E, nu=NU, **law_inputs(entry.law))
     scale = np.abs(k.stiffness(D, np.zeros((len(X), k.n_dofs)))).max() * np.abs(X).max()
     translation = np.broadcast_to(np.arange(1.0, k.dim + 1), X.shape)
     assert np.abs(k.forces(D, translation)).max() < 1e-12 * scale
@@ -161,7 +161,7 @@ def test_tangent_at_rest_equals_hooke(entry):
     hooke = tm.load_kernel(entry.element, "hooke", entry.quadrature)
     X = random_elements(entry.element, 3, seed=4, straight=entry.quadrature == "exact")
     zero = np.zeros((len(X), k.n_dofs))
-    D = k.constants(X, E=E, nu=NU)
+    D = k.constants(X, E=E, nu=NU, **law_inputs(entry.law))
     f, K = k.forces_and_stiffness(D, zero)
     K_hooke = hooke.stiffness(hooke.constants(X, E=E, nu=NU), zero)
     assert np.abs(f).max() < 1e-12 * np.abs(K).max()      # stress free at rest
