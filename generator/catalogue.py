@@ -61,8 +61,9 @@ def entries(elements=None, law_names=None, quadrature_names=None) -> list[Entry]
 def catalogue_laws(user: bool = True) -> list[str]:
     """Every law and volume measure: what generated/ holds kernels of (the measures on every element:
     the generator does not read the runtime's table of which formulation applies where); with user,
-    the law files outside the package too (laws.load_file, $TENSORMASS_LAWS)."""
-    return laws.names(user) + laws.measure_names()
+    the law files outside the package too (laws.load_file, $TENSORMASS_LAWS) and the viscoelastic
+    step energies NAME_viscous (laws/viscous.py), generated on first use like them."""
+    return laws.names(user) + laws.measure_names() + (laws.viscous_names() if user else [])
 
 
 def catalogue() -> list[Entry]:

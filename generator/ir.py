@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import sys
 from functools import lru_cache
 from types import SimpleNamespace
 
@@ -99,10 +100,13 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
     dim, n = ref.dim, ref.n_nodes
     deriv = law_derivatives(law, dim)
 
-    dN_table, names = _shape_gradient_table(ref, rule)
+    dN_table, names = _shape_gradient_table(ref, rule, law.point_inputs)
     geo_temps, geo_G = geometry_code(dim)
     law_code, material, J = _law_code(deriv, law, max_ops)
-    stride = 1 + n * dim
+    if law.point_inputs and recompute:
+        raise ValueError(f"law {law_name!r} has inputs per point (its history): it needs constants='precompute'")
+    point_inputs = tuple(law.point_inputs)
+    stride = 1 + n * dim + len(point_inputs)
     material_names = tuple(name for name, _ in material.outputs)
     if recompute:
         names = [f"X[{i}][{k}]" for i in range(n) for k in range(dim)]
@@ -130,6 +134,7 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
         rule_weights=tuple(float(w) for w in rule.weights),
         recompute=recompute,
         stress_record=stress_record(dim),
+        point_inputs=point_inputs,
     )
     # Everything derived is computed before the IR exists: it is never patched afterwards.
     draft = SimpleNamespace(**fields, n_dofs=n * dim, dofs_per_node=dim)
@@ -137,14 +142,16 @@ def build_ir(element_name: str, law_name: str, quadrature: str, max_ops: int = D
                     bodies=build_bodies(draft))
 
 
-def _shape_gradient_table(ref, rule):
-    """dN_i/dxi_k at every point as floats, and the names of the D columns they lead to."""
+def _shape_gradient_table(ref, rule, point_inputs=()):
+    """dN_i/dxi_k at every point as floats, and the names of the D columns they lead to (with the
+    law's point inputs after G)."""
     dN_symbolic = ref.gradients()
     table, names = [], []
     for q, point in enumerate(rule.points):
         dN = dN_symbolic.subs(dict(zip(ref.xi, point)))
         table.append(tuple(tuple(float(sp.N(dN[i, k], 30)) for k in range(ref.dim)) for i in range(ref.n_nodes)))
         names += [f"v[{q}]"] + [f"G[{q}][{i}][{b}]" for i in range(ref.n_nodes) for b in range(ref.dim)]
+        names += [f"{name}[{q}]" for name, _ in point_inputs]
     return tuple(table), names
 
 
@@ -235,4 +242,6 @@ def _input_hash(ref, rule, law) -> str:
     h.update(repr((ref.name, ref.nodes, [str(s) for s in ref.shape_functions])).encode())
     h.update(repr((rule.name, [tuple(str(x) for x in p) for p in rule.points], [str(w) for w in rule.weights])).encode())
     h.update(inspect.getsource(inspect.getmodule(law.energy)).encode())
+    for module in law.sources:                 # a derived law (laws/viscous.py): its base law's file too
+        h.update(inspect.getsource(sys.modules[module]).encode())
     return h.hexdigest()[:16]

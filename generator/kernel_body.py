@@ -197,6 +197,8 @@ class BodyBuilder:
             out.append(self.geometry_G(lambda node, b: ref("Gq", node, b)))
         else:
             out.append(Declare("v", ref("D", q * ir.point_stride)))
+        start = 1 + self.n * d                 # the law's point inputs (its history) follow G
+        out += [Declare(name, ref("D", q * ir.point_stride + start + k)) for k, (name, _) in enumerate(ir.point_inputs)]
         out += [Declare(f"F{a}{b}", sp.Integer(1 if a == b else 0), mutable=True) for a in range(d) for b in range(d)]
         body = [Declare(f"gi{b}", self.G(i, b)) for b in range(d)]
         body += [Declare(f"u{a}", self.arr("u", i, a)) for a in range(d)]
@@ -267,6 +269,8 @@ class BodyBuilder:
         if not ir.recompute:
             point.append(Assign(ref("D", q * ir.point_stride), ref("WEIGHTS", q) * _s("detJ")))
             point.append(self.geometry_G(lambda node, b: ref("D", q * ir.point_stride + 1 + node * d + b)))
+            point += [Assign(ref("D", q * ir.point_stride + 1 + self.n * d + k), sp.Float(value))
+                      for k, (_, value) in enumerate(ir.point_inputs)]
         out = [Loop("q", 0, ir.n_points, tuple(point))]
         if ir.recompute:
             out.append(Loop("i", 0, self.n, tuple(Assign(ref("D", i * d + k), ref("X", i, k)) for k in range(d))))

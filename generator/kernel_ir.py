@@ -45,6 +45,7 @@ class KernelIR:
     #                              or "shell" (generator/shell.py: nodal displacements and rotations)
     dofs: int = 0                # unknowns per node; 0: the space dimension (solids)
     quadratic_energy: bool = False   # W homogeneous quadratic in grad u: K constant and f = -K u
+    point_inputs: tuple = ()     # ((name, value at rest), ...) stored per point after G (laws.Law.point_inputs)
 
     @property
     def dofs_per_node(self) -> int:
@@ -53,10 +54,15 @@ class KernelIR:
     @property
     def point_fields(self) -> dict:
         """Where each point's fields start in its block of D: v (weight x det J; a discrete kernel's
-        rest measure) and G (shape gradients: not for recompute or discrete kernels)."""
+        rest measure), G (shape gradients: not for recompute or discrete kernels) and the point inputs."""
         if self.recompute:
             return {}
-        return {"v": 0} if self.source in ("discrete", "shell") else {"v": 0, "G": 1}
+        if self.source in ("discrete", "shell"):
+            return {"v": 0}
+        fields = {"v": 0, "G": 1}
+        if self.point_inputs:                  # what the runtime writes per point (a viscous law's history)
+            fields["inputs"] = 1 + self.n_nodes * self.dim
+        return fields
 
     @property
     def n_dofs(self) -> int:

@@ -30,10 +30,11 @@ from pathlib import Path
 
 from .base import DiscreteLaw, Law, LawError, lame_from_E_nu
 from .measures import MEASURES
+from . import viscous as _viscous
 
 __all__ = ["Law", "DiscreteLaw", "LawError", "lame_from_E_nu", "get", "names", "continuum_names", "discrete_names", "shell_names",
            "is_discrete", "is_shell", "is_quadratic", "measure_names", "kernel_law", "load_file", "user_law",
-           "UserLaw", "SEARCH_PATH", "source_hash"]
+           "UserLaw", "SEARCH_PATH", "source_hash", "viscous_names"]
 
 SEARCH_PATH = "TENSORMASS_LAWS"      # folders of law files or .py files, separated by os.pathsep
 
@@ -239,15 +240,27 @@ def get(name: str) -> Law:
     try:
         return _registry()[name]
     except KeyError:
+        base = _viscous.base_name(name)
+        if base is not None and base in continuum_names():      # a viscous part's kernel law
+            return _viscous.viscous(get(base))
         raise LawError(f"unknown law {name!r}; known laws: {', '.join(names())} (a law file outside the "
                        f"package: law_file = \"FILE.py\" in the [[material]], or ${SEARCH_PATH})") from None
 
 
 def kernel_law(name: str) -> Law:
-    """What a kernel integrates: a law, or a volume measure (generator and kernel loader)."""
+    """What a kernel integrates: a law, a volume measure, or a law's viscoelastic step energy
+    NAME_viscous (laws/viscous.py) (generator and kernel loader)."""
     if name in MEASURES:
         return MEASURES[name][0]
+    base = _viscous.base_name(name)
+    if base is not None and base in continuum_names():
+        return _viscous.viscous(get(base))
     return get(name)
+
+
+def viscous_names() -> list[str]:
+    """NAME_viscous for every law with an energy density W(F): kernels generated on first use."""
+    return [n + _viscous.SUFFIX for n in continuum_names()]
 
 
 def source_hash(law: Law) -> str:

@@ -27,6 +27,10 @@ class Law:
     from E and nu (a fibre stiffness); default None: required.
     directions: names of unit vectors given per cell by the scene ([[material]] fibres); the
     kernels receive their components as inputs named NAME_x, NAME_y, NAME_z.
+    point_inputs: ((name, value at rest), ...): numbers per integration point that the runtime
+    writes into the per-element constants between steps (a viscous law's history: laws/viscous.py);
+    energy() receives them as symbols. They are never hoisted: they change every step.
+    sources: the modules whose source the kernels depend on beyond energy's (a derived law's base).
     """
 
     name: str
@@ -39,6 +43,8 @@ class Law:
     requires_positive_J: bool = False
     options: tuple = ()
     directions: tuple = ()
+    point_inputs: tuple = ()
+    sources: tuple = ()
     kind = "continuum"               # an energy density W(F); DiscreteLaw: an element energy in nodal positions
 
     @property
@@ -55,15 +61,19 @@ class Law:
         return tuple(self.parameters) + self.option_names + self.direction_components
 
     def symbols(self) -> dict[str, sp.Symbol]:
+        """The kernel inputs' symbols (what hoisting treats as per-element constants)."""
         return {p: sp.Symbol(p, real=True) for p in self.inputs}
+
+    def point_symbols(self) -> dict[str, sp.Symbol]:
+        return {p: sp.Symbol(p, real=True) for p, _ in self.point_inputs}
 
     def W(self, F, symbols: dict | None = None):
         """The energy density at F with the input symbols (default: symbols()); the direction
-        components are passed as the 3x1 vectors energy() receives."""
+        components are passed as the 3x1 vectors energy() receives, the point inputs as symbols."""
         symbols = self.symbols() if symbols is None else symbols
         scalars = {p: symbols[p] for p in tuple(self.parameters) + self.option_names}
         vectors = {d: sp.Matrix([symbols[f"{d}_{c}"] for c in "xyz"]) for d in self.directions}
-        return self.energy(F, **scalars, **vectors)
+        return self.energy(F, **scalars, **vectors, **self.point_symbols())
 
     def native_parameters(self, E=None, nu=None, **given) -> dict[str, np.ndarray]:
         """Native parameters from either (E, nu) or the native names, validated; the options (their

@@ -66,6 +66,8 @@ class Part:
     density: np.ndarray          # (n,) mass density of each cell
     active: np.ndarray | None = None   # (n,) bool: cells this law currently models (None: all)
     rotary: np.ndarray | None = None   # (n,) rotary inertia per unit mass (m^2) of nodes with rotations (shells)
+    # viscous parts (laws/viscous.py): (tau, beta), each (n, n_branches), of their Prony branches
+    branches: tuple | None = None
     # per cell and node: its lumped mass and its share of the body force integral int N_a rho dV
     # (zero rows for inactive cells), kept so a topology change re-sums nodes locally (runtime.change.cutting)
     cell_masses: np.ndarray | None = None
@@ -163,10 +165,17 @@ def _material_kernels(mesh, materials, adapt, index) -> set:
     rules can switch a group to, and the volume measure of a material under a locking-free formulation."""
     triples = set()
     for (element, law, quad), members in material_groups(mesh, materials, index).items():
+        if _viscous_members(materials, members):
+            law = laws.kernel_law(law + "_viscous").name
         triples.update((element, reach, quad) for reach in reachable_laws(law, adapt))
         if any(getattr(materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
             triples.add((element, volumetric_functions(law)[1], quad))
     return triples
+
+
+def _viscous_members(materials, members) -> bool:
+    """Whether a material of these cells has Prony branches ([[material]] viscous)."""
+    return any(getattr(materials[m], "viscous", None) for _, _, m in members)
 
 
 def _shell_kernel(kernel, law: str, flags: list):
@@ -298,7 +307,13 @@ class Model:
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
             dofs = node_dofs(cells, self.dofs_per_node)
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
+            branches = None
+            if _viscous_members(self.materials, members):   # laws/viscous.py: the step energy's kernel
+                branches = self._branches(law, members)
+                law = laws.kernel_law(law + "_viscous").name
             reach = reachable_laws(law, self.adapt)
+            if branches is not None and len(reach) > 1:
+                raise TensormassError(f"law {law!r}: viscous materials cannot switch laws ([[adapt]] switch_law)")
             first = len(parts)
             formulated = self._formulated(element, law, members, reach)
             for k, name in enumerate(reach):
@@ -320,7 +335,7 @@ class Model:
                 # a shell node's rotary inertia per unit mass: h^2 / 12 (runtime.assembly.mass)
                 rotary = params["thickness"] ** 2 / 12 if laws.is_shell(name) else None
                 parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active,
-                                  rotary=rotary))
+                                  rotary=rotary, branches=branches))
             if len(reach) > 1:
                 self.groups.append(LawGroup(list(range(first, len(parts))), list(reach),
                                             np.zeros(len(cells), dtype=np.int64)))
@@ -374,6 +389,18 @@ class Model:
             for p, v in values.items():
                 columns.setdefault(p, []).append(np.broadcast_to(v, (len(ids),)))
         return {p: np.concatenate(v) for p, v in columns.items()}
+
+    def _branches(self, law: str, members) -> tuple:
+        """(tau, beta), each (n_cells, n_branches), of the Prony branches of these cells' materials
+        (a material without them, or with fewer: beta = 0, no viscosity)."""
+        specs = [tuple(getattr(self.materials[m], "viscous", None) or ()) for _, _, m in members]
+        n_branches = max(len(spec) for spec in specs)
+        tau, beta = [], []
+        for (_, ids, _), spec in zip(members, specs):
+            padded = list(spec) + [(1.0, 0.0)] * (n_branches - len(spec))
+            tau.append(np.tile([t for t, _ in padded], (len(ids), 1)))
+            beta.append(np.tile([b for _, b in padded], (len(ids), 1)))
+        return np.vstack(tau).astype(float), np.vstack(beta).astype(float)
 
     def _fibre_inputs(self, law: str, mat, m: int, block: int, ids) -> dict:
         """The direction components a law with fibres receives (runtime.mesh.fibres), per cell."""

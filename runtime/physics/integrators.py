@@ -73,9 +73,15 @@ class Static(_Integrator):
     def step(self, k: int) -> dict:
         ctx, lam = self.ctx, k / self.n_steps
         before = ctx.newton_iterations
+        if ctx.history is not None:        # viscous materials: each load step lasts solver.dt
+            ctx.history.prepare(self.model.solver.dt)
         potential = Potential(ctx.asm, self.external_force(lam), lam)
         ctx.u = solve_step(ctx, potential, ctx.u, self.prescribed(lam), f"static: load step {k}/{self.n_steps}",
                            (k - 1) / self.n_steps, lam, 1.0)
+        if ctx.history is not None:
+            ctx.history.commit(ctx.u)
+            ctx.t = k * self.model.solver.dt
+            return {"time": ctx.t, "newton": ctx.newton_iterations - before}
         ctx.t = lam
         return {"time": lam, "newton": ctx.newton_iterations - before}
 
@@ -113,11 +119,16 @@ class _Dynamic(_Integrator):
         return {"time": ctx.t, "newton": ctx.newton_iterations - before}
 
     def _advance(self, u, v, t, h, depth, k):
+        history = self.ctx.history
         try:
+            if history is not None:        # viscous materials: the step's g and H (runtime.physics.viscous)
+                history.prepare(h)
             u1, v1 = self.single(u, v, t, h)
             if not (np.all(np.isfinite(u1)) and np.all(np.isfinite(v1))):
                 raise TensormassError("the step produced NaN/Inf")
             self.ctx.check_not_inverted(u1)
+            if history is not None:
+                history.commit(u1)
             return u1, v1
         except TensormassError as exc:
             if depth >= _MAX_DT_HALVINGS:

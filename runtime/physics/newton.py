@@ -17,6 +17,7 @@ from ... import laws
 from ..assembly import volumetric
 from ..assembly.assembly import Assembler
 from ..base.errors import InvertedElementError, TensormassError
+from .viscous import ViscousHistory
 from ..solve.amg import rigid_body_modes
 from ..solve.solvers import ConstrainedSystem, LinearSolver
 from .health import safe_norm
@@ -66,6 +67,8 @@ class Context:
         # (u, r): the residual of the discrete equation of motion the last step solved, whose rows on
         # the fixed dofs are the reaction forces at the state u (runtime.physics.reactions); None: not known
         self.residual = None
+        # viscous parts (laws/viscous.py): their Prony state, prepared before and committed after each step
+        self.history = ViscousHistory(model, self.asm) if any(p.branches is not None for p in model.parts) else None
         self._cell_size = None
 
     def warm_up_solver(self) -> None:

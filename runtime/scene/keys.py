@@ -150,6 +150,9 @@ KEYS = (
     Key("material", "density", "number", 1000.0, "kg/m^3", doc="Mass density, > 0."),
     Key("material", "formulation", "string", "displacement", choices="runtime.physics.formulations:FORMULATIONS",
         doc="How the law's volumetric part is integrated (see Materials and formulations)."),
+    Key("material", "viscous", "array of tables",
+        doc="Prony branches [{tau = 0.1, beta = 0.5}, ...]: relaxation time tau (s, > 0) and stiffness beta "
+        "(>= 0) over the relaxed law's; the law's E and nu are the relaxed (long-term) ones."),
     Key("material", "fibres", "array or string", unit="1",
         doc="A law with fibre directions (hgo): one per direction, a vector [1, 0, 0] or \"FILE.py:FUNCTION\" "
         "(a function of the cells' rest centroids, (n, dim), returning (n, 3)); normalised per cell."),
@@ -204,7 +207,8 @@ KEYS = (
     Key("loads.pressure", "amplitude", "string", doc="An amplitude scaling it (dynamic runs only)."),
     # -- [solver] --------------------------------------------------------------------------------
     Key("solver", "kind", "string", "static", choices="runtime.scene.parser:SOLVER_KINDS", doc="The integrator."),
-    Key("solver", "dt", "number", 0.01, "s", doc="The time step (dynamic runs), > 0."),
+    Key("solver", "dt", "number", 0.01, "s", doc="The time step (dynamic runs; static runs with viscous "
+        "materials: the time each load step lasts), > 0."),
     Key("solver", "steps", "integer", 1, doc="Time steps (dynamic) or load steps (static), 1 to 10^8."),
     Key("solver", "linear", "string", "auto", choices="runtime.scene.parser:LINEAR_SOLVERS", doc="The linear solver."),
     Key("solver", "cg_tolerance", "number", 1e-8, "1", doc="Relative residual of the CG solves."),

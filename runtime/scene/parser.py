@@ -37,7 +37,8 @@ TEAR_CRITERIA = ("stretch",)
 _REMOVE = ("time", "step", "box", "region", "name")
 _REFINE = ("time", "step", "box", "name")
 _MESH = ("generate", "file", "size", "cells", "element", "origin", "radius", "subdivisions", "divisions")
-_MATERIAL = ("region", "box", "law", "law_file", "quadrature", "E", "nu", "density", "formulation", "fibres")
+_MATERIAL = ("region", "box", "law", "law_file", "quadrature", "E", "nu", "density", "formulation", "fibres",
+             "viscous")
 _FIXED = ("box", "displacement", "components", "amplitude", "rotation", "translation", "region", "name",
           "moment_about")
 _LOADS = ("gravity", "force", "traction", "moment", "pressure", "gravity_amplitude")
@@ -124,6 +125,7 @@ class Parser(ValueParser):
         if topology and adapt:
             raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
                              "rules yet")
+        _check_viscous(materials, solver, topology, adapt)
         if (contact is not None or obstacles) and (topology or any(a.action == "refine" for a in adapt)):
             what = f"[[{topology[0].kind}]]" if topology else "[[adapt]] action = \"refine\""
             raise SceneError(f"contact: cannot be combined with {what} (a contact surface that changes during the "
@@ -285,6 +287,10 @@ class Parser(ValueParser):
         density = self.number(t.get("density", 1000.0), f"{key}.density")
         if density <= 0:
             raise SceneError(f"{key}.density: must be > 0 (got {format_value(density)})")
+        for extra in ("viscous", "fibres"):
+            if extra in t and law.kind != "continuum":
+                raise SceneError(f"{key}.{extra}: law {law_name!r} has no energy density W(F) (a {law.kind} "
+                                 f"model); {extra} applies to the laws of the finite elements")
         if law.kind in ("discrete", "shell"):
             mat = self._discrete_material(t, key, law, region, box, quadrature, formulation, density)
             mat.law_file = law_file
@@ -312,7 +318,7 @@ class Parser(ValueParser):
         options = {o: self.number(t[o], f"{key}.{o}") for o in law.option_names if o in t}
         mat = Material(region=region, box=box, law=law_name, quadrature=quadrature, E=E, nu=nu,
                        params={**native, **options}, density=density, formulation=formulation,
-                       law_file=law_file, fibres=self.fibres(t, key, law))
+                       law_file=law_file, fibres=self.fibres(t, key, law), viscous=self.viscous(t, key))
         try:                              # E and nu are validated here, once, by laws (validate_E_nu)
             values = mat.native_parameters()
         except laws.LawError as exc:
@@ -321,6 +327,31 @@ class Parser(ValueParser):
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
         return mat
+
+    def viscous(self, t, key) -> tuple | None:
+        """A [[material]]'s Prony branches ((tau, beta), ...) (laws/viscous.py), or None."""
+        if "viscous" not in t:
+            return None
+        raw = t["viscous"]
+        if not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
+            raise SceneError(f"{key}.viscous: expected an array of tables [{{tau = 0.1, beta = 0.5}}, ...] "
+                             f"(one per Prony branch), got {type_name(raw)}")
+        if len(raw) > MAX_BRANCHES:
+            raise SceneError(f"{key}.viscous: at most {MAX_BRANCHES} Prony branches, got {len(raw)}")
+        branches = []
+        for i, b in enumerate(raw):
+            where = f"{key}.viscous[{i}]"
+            self.keys(b, where, ("tau", "beta"))
+            for name in ("tau", "beta"):
+                if name not in b:
+                    raise SceneError(f"{where}.{name}: missing (a branch is {{tau = relaxation time in s, "
+                                     "beta = its stiffness over the relaxed one}})")
+            tau = self.number(b["tau"], f"{where}.tau", positive=True)
+            beta = self.number(b["beta"], f"{where}.beta")
+            if not beta >= 0:
+                raise SceneError(f"{where}.beta: must be >= 0 (got {format_value(beta)})")
+            branches.append((tau, beta))
+        return tuple(branches)
 
     def fibres(self, t, key, law) -> tuple | None:
         """A [[material]]'s fibres: one entry per direction of its law (runtime.mesh.fibres)."""
@@ -811,6 +842,24 @@ def _law_error(key, E, nu, exc) -> str:
     if nu is not None and nu <= -1.0:
         return f"{key}.nu: Poisson's ratio must be > -1 (got {format_value(nu)})"
     return f"{key}: {exc}"
+
+
+MAX_BRANCHES = 20
+
+
+def _check_viscous(materials, solver, topology, adapt) -> None:
+    """Viscous materials (laws/viscous.py): the integrators and run features their history supports."""
+    viscous = [i for i, m in enumerate(materials) if m.viscous]
+    if not viscous:
+        return
+    key = f"material[{viscous[0]}].viscous"
+    if solver.kind in ("explicit", "generalized_alpha"):
+        raise SceneError(f"{key}: viscous materials run with kind = \"static\" (each load step lasting "
+                         f"solver.dt), \"implicit_euler\" or \"backward_euler\", not {solver.kind!r}")
+    if topology or adapt:
+        what = f"[[{topology[0].kind}]]" if topology else "[[adapt]]"
+        raise SceneError(f"{key}: viscous materials cannot be combined with {what} yet (their history is not "
+                         "carried to changed cells)")
 
 
 def _check_native(key, law, native, dim):

@@ -36,6 +36,7 @@ class Material:
     density: float = 1000.0
     formulation: str = "displacement"    # runtime.physics.formulations: displacement | mean_dilatation | nodal_pressure
     law_file: str | None = None          # the file of a law outside the package (laws.load_file), resolved
+    viscous: tuple | None = None         # Prony branches ((tau, beta), ...) (laws/viscous.py); None: elastic
     fibres: tuple | None = None          # one entry per direction of the law (runtime.mesh.fibres): a vector or a function
 
     def native_parameters(self) -> dict:

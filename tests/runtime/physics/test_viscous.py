@@ -1,0 +1,185 @@
+"""Viscoelasticity with Prony branches (laws/viscous.py, runtime.physics.viscous): the step kernel
+against finite differences and objectivity, relaxation and creep of a cube against the closed
+forms of the linear Prony model, the history's prepare/commit rules, and the scene's checks."""
+import numpy as np
+import pytest
+
+import tensormass as tm
+from tensormass.runtime.base.errors import SceneError
+from tensormass.runtime.run.simulation import Simulation
+from tensormass.runtime.scene.scene import Scene
+
+from helpers import fd_gradient, random_elements, relative_error
+
+E, NU = 3000.0, 0.3
+BRANCHES = [(0.5, 2.0), (0.05, 1.0)]          # (tau s, beta): long-term E, instantaneous 4 E
+H, STEPS = 0.02, 50                            # s per step, steps (1 s)
+
+
+def test_the_step_kernel_is_the_derivative_of_its_energy_and_objective():
+    k = tm.load_kernel("tetra", "neohookean_viscous", "gauss1")
+    assert k.point_fields["inputs"] == 1 + 4 * 3
+    X = random_elements("tetra", 5, seed=2)
+    D = k.constants(X, E=3.0, nu=0.3)
+    start = k.point_fields["inputs"]
+    assert np.all(D[:, start] == 1.0) and np.all(D[:, start + 1:start + 7] == 0.0)     # at rest: g = 1, H = 0
+    base = tm.load_kernel("tetra", "neohookean", "gauss1")
+    u = 0.1 * np.random.default_rng(0).standard_normal((5, 12))
+    assert relative_error(k.forces(D, u), base.forces(base.constants(X, E=3.0, nu=0.3), u)) < 1e-13
+    rng = np.random.default_rng(1)
+    D[:, start] = 1.7
+    D[:, start + 1:start + 7] = rng.standard_normal((5, 6))
+    f, K = k.forces_and_stiffness(D, u)
+    assert relative_error(f, -fd_gradient(lambda v: k.energy(D, v), u, 1e-6)) < 1e-6
+    assert relative_error(K, -fd_gradient(lambda v: k.forces(D, v), u, 1e-6)) < 1e-6
+    # a rigid rotation of a deformed state: the same energy, forces turned with it
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    x = X + u.reshape(5, 4, 3)
+    turned = (x @ R.T - X).reshape(5, 12)
+    assert relative_error(k.energy(D, turned), k.energy(D, u)) < 1e-12
+    assert relative_error(k.forces(D, turned).reshape(5, 4, 3), f.reshape(5, 4, 3) @ R.T) < 1e-11
+
+
+def cube(viscous, pulled, amplitude_end=0.02, steps=STEPS):
+    return Scene.from_string(cube_text(viscous, pulled, amplitude_end, steps))
+
+
+def cube_text(viscous, pulled, amplitude_end=0.02, steps=STEPS):
+    """A unit cube of tetrahedra in uniaxial stress: rollers on three faces, `pulled` on x = 1 (a
+    prescribed displacement or a traction), reached at the load factor amplitude_end and held."""
+    branches = ", ".join(f"{{tau = {t}, beta = {b}}}" for t, b in viscous)
+    rollers = "".join(f"""
+[[fixed]]
+box = {[[-1] * a + [-0.01] + [-1] * (2 - a), [2] * a + [0.01] + [2] * (2 - a)]}
+components = [{a}]
+""" for a in range(3))
+    return f"""
+[mesh]
+generate = "bar"
+size = [1.0, 1.0, 1.0]
+cells = [1, 1, 1]
+element = "tetra"
+[[material]]
+law = "neohookean"
+quadrature = "gauss1"
+E = {E}
+nu = {NU}
+{"viscous = [" + branches + "]" if viscous else ""}
+[[amplitude]]
+name = "step"
+factor = [0.0, {amplitude_end}, 1.0]
+value = [0.0, 1.0, 1.0]
+{rollers}
+{pulled}
+[solver]
+kind = "static"
+steps = {steps}
+dt = {H}
+"""
+
+
+PULL = """
+[[fixed]]
+name = "pulled"
+box = [[0.99, -1, -1], [1.01, 2, 2]]
+components = [0]
+displacement = [0.001, 0, 0]
+amplitude = "step"
+"""
+PROBE = """
+[[probe]]
+name = "corner"
+point = [1.0, 0.0, 0.0]
+"""
+TRACTION = """
+[[loads.traction]]
+box = [[0.99, -1, -1], [1.01, 2, 2]]
+value = [3.0, 0, 0]
+amplitude = "step"
+"""
+
+
+def relaxation(t, strain=1e-3):
+    """Uniaxial stress of the linear Prony model for a strain ramp over the first step, then held."""
+    rate = strain / H
+    if t <= H * (1 + 1e-9):
+        return E * rate * (t + sum(b * tau * (1 - np.exp(-t / tau)) for tau, b in BRANCHES))
+    return E * strain + E * rate * sum(b * tau * (np.exp(-(t - H) / tau) - np.exp(-t / tau)) for tau, b in BRANCHES)
+
+
+def history(scene, what):
+    summary = Simulation(scene).run()
+    assert summary.status == "ok"
+    rows = summary.per_step
+    return np.array(rows["time"]), what(rows)
+
+
+def test_relaxation_follows_the_prony_closed_form():
+    """Held strain: the force decays from 4 E to E (1 + sum beta exp(-t / tau)); normalised by the
+    elastic run's force at the same strain, within 0.3 % (the exponential update's first step)."""
+    force = lambda rows: np.array(rows["reactions"]["pulled"]["force"])[:, 0]
+    t, F = history(cube(BRANCHES, PULL), force)
+    _, F_elastic = history(cube((), PULL), force)
+    measured = F / F_elastic[-1]
+    expected = np.array([relaxation(x) for x in t]) / (E * 1e-3)
+    assert t[-1] == pytest.approx(1.0)
+    assert np.abs(measured / expected - 1).max() < 3e-3
+    assert measured[0] > 3.4 and measured[-1] < 1.35                 # it does relax
+
+
+def test_creep_follows_the_standard_linear_solid():
+    """One branch (tau, beta) under a held traction: the strain creeps from sigma / (E (1 + beta)) to
+    sigma / E with the time tau (1 + beta) (the load ramps over the first step); normalised by the
+    elastic run's strain, within 0.3 %."""
+    tau, beta = 0.2, 1.5
+    strain = lambda rows: np.array(rows["probes"]["corner"])[:, 0]        # the x = 1 face: uniform strain
+    t, eps = history(cube([(tau, beta)], TRACTION + PROBE), strain)
+    _, eps_elastic = history(cube((), TRACTION + PROBE), strain)
+    tc = tau * (1 + beta)
+    expected = np.array([(H - beta / (1 + beta) * tc * np.exp(-x / tc) * (np.exp(H / tc) - 1)) / H for x in t])
+    measured = eps / eps_elastic[-1]
+    assert np.abs(measured / expected - 1).max() < 3e-3
+    assert measured[0] < 0.45 and measured[-1] > 0.9             # it does creep
+
+
+def test_prepare_without_commit_keeps_the_accepted_state():
+    """A refused step (a halved dt, a retry) prepares again from the last accepted state: the point
+    inputs depend on (state, h) only."""
+    sim = Simulation(cube(BRANCHES, PULL, steps=3))
+    sim.run()
+    history_ = sim.ctx.history
+    part = sim.model.parts[0]
+    history_.prepare(0.01)
+    first = part.D.copy()
+    history_.prepare(0.005)
+    history_.prepare(0.01)
+    assert np.array_equal(part.D, first)
+
+
+@pytest.mark.parametrize("change, message", [
+    (("viscous = [", "viscous = [{tau = 0.0, beta = 1.0}, "), r"viscous\[0\]\.tau: .*> 0"),
+    (("viscous = [", "viscous = [{tau = 1.0, beta = -1.0}, "), r"viscous\[0\]\.beta: must be >= 0"),
+    (("viscous = [", "viscous = [{tau = 1.0}, "), r"viscous\[0\]\.beta: missing"),
+    (("viscous = [", "viscous = [{tau = 1.0, beta = 1.0, eta = 2.0}, "), r"viscous\[0\]\.eta: unknown key"),
+    (('kind = "static"', 'kind = "explicit"'), r"material\[0\]\.viscous: viscous materials run with"),
+    (('law = "neohookean"\nquadrature = "gauss1"', 'law = "mss"'), r"material\[0\]\.viscous: law 'mss' has no energy"),
+])
+def test_scene_errors_name_the_key(change, message):
+    text = cube_text(BRANCHES, PULL).replace(*change)
+    with pytest.raises(SceneError, match=message):
+        Scene.from_string(text)
+
+
+def test_an_implicit_euler_run_with_viscous_branches():
+    """A dynamic run: the history commits once per accepted step, the run ends ok, and the branches
+    damp the motion the elastic run keeps (implicit Euler damps both; the viscous one more)."""
+    def swing(viscous):
+        text = cube_text(viscous, PROBE, steps=40).replace('kind = "static"', 'kind = "implicit_euler"')
+        text = text.replace("[[material]]", "[loads]\ngravity = [-2.0, 0, 0]\ngravity_amplitude = \"step\"\n[[material]]")
+        summary = Simulation(Scene.from_string(text)).run()
+        assert summary.status == "ok"
+        x = np.array(summary.per_step["probes"]["corner"])[:, 0]
+        return x
+    elastic, viscous = swing(()), swing([(0.05, 3.0)])
+    assert np.abs(np.diff(viscous[-10:])).max() < np.abs(np.diff(elastic[-10:])).max()
