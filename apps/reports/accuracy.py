@@ -17,7 +17,8 @@ under internal pressure in plane strain, prism and hexahedral layers against Lam
 incompressible (Newton iterations at nu = 0.499 on the organ and the cantilever, with FElupe's
 plain-Newton counts where it is installed; incompressible.py) and dynamics (the organ falling for 1 s:
 time per step against the trajectory's error for the budgeted implicit Euler step, CG caps, dt, explicit;
-dynamics.py, whose rows end with DYNAMICS_COLUMNS).
+dynamics.py, whose rows end with DYNAMICS_COLUMNS) and tissue (Prony relaxation and creep, the LBMC
+power laws as Prony fits in simple shear, the thesis' B22 block, HGO tension; tissue.py).
 results.csv starts with a `benchmark` column, has a `formulation` column (runtime.physics.formulations) and a
 `case` column (volume: nu and compression); with hybmss rows it ends with model, reference_value and
 thesis_value (MODEL_COLUMNS);
@@ -84,6 +85,7 @@ from .benchmarks import BENCHMARKS as CLASSIC
 from .cook import cook
 from .cylinder import cylinder
 from .dynamics import DYNAMICS_COLUMNS, dynamics, plot as dynamics_plot
+from .tissue import tissue
 from .incompressible import incompressible
 from .block import block
 from .hybmss import hybmss
@@ -169,7 +171,7 @@ def _cantilever_reference(ref_cells) -> tuple:
 def _benchmark_task(name, quick, sweep) -> tuple:
     """One of the other built-in benchmarks as a task: (its result dict, its progress lines)."""
     BENCHMARKS = {**CLASSIC, **ADAPTIVE, "cook": cook, "block": block, "hybmss": hybmss, "cylinder": cylinder,
-                  "incompressible": incompressible, "dynamics": dynamics}
+                  "incompressible": incompressible, "dynamics": dynamics, "tissue": tissue}
     lines = []
     return BENCHMARKS[name](quick, lines.append, sweep), lines
 
@@ -553,7 +555,7 @@ def _report_md(rows, fronts, results, quick, scene_path, elapsed) -> str:
 # -- entry points ----------------------------------------------------------------------------------
 BENCHMARK_NAMES = ("cantilever", "beam2d", "volume", "mixed", "large_deflection", "shear", "torsion",
                    "adaptive_beam", "refinement", "cook", "block", "hybmss", "cylinder", "incompressible",
-                   "dynamics")
+                   "dynamics", "tissue")
 
 
 def _resolve(benchmarks) -> list:

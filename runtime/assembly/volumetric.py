@@ -44,6 +44,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ... import laws
+from ...laws.viscous import base_name
 from ...generated import volumetric as committed_splits
 from ..base.errors import InvertedElementError, TensormassError
 from ..kernels import kernels as _kernels
@@ -57,7 +58,10 @@ def volumetric_functions(law_name: str):
     """(bulk parameter, measure law, function(theta, **params) -> (U, U', U'')) of a law.
 
     From the committed generated/volumetric.py while the law file is unchanged; a new or edited
-    law is split now (sympy) and the same expressions are compiled in memory."""
+    law is split now (sympy) and the same expressions are compiled in memory.  A viscous law's
+    (laws/viscous.py) is its base law's: under a formulation the volumetric part stays elastic and
+    the Prony branches act on the deviatoric part (Simo's split)."""
+    law_name = base_name(law_name) or law_name
     law = laws.get(law_name)
     table = committed_splits
     if law_name in table.SPLITS and table.SPLITS[law_name][2] == laws.source_hash(law):

@@ -41,6 +41,25 @@ def test_the_step_kernel_is_the_derivative_of_its_energy_and_objective():
     assert relative_error(k.forces(D, turned).reshape(5, 4, 3), f.reshape(5, 4, 3) @ R.T) < 1e-11
 
 
+@pytest.mark.heavy           # a numba compile of two generated modules (tens of seconds cold)
+@pytest.mark.parametrize("law", ["neohookean_viscous", "hgo_viscous"])
+def test_c_and_numba_agree_on_viscous_kernels(law):
+    """The step kernels of a viscous law, fibres included: C = numba on random g, H and u."""
+    from helpers import law_inputs
+    c, nb = (tm.load_kernel("tetra", law, "gauss1", backend=b) for b in ("c", "numba"))
+    X = random_elements("tetra", 6, seed=5)
+    D = nb.constants(X, E=3.0, nu=0.3, **law_inputs(law))
+    assert np.array_equal(D, c.constants(X, E=3.0, nu=0.3, **law_inputs(law)))
+    start = c.point_fields["inputs"]
+    rng = np.random.default_rng(3)
+    D[:, start] = 1.4
+    D[:, start + 1:start + 7] = rng.standard_normal((6, 6))
+    u = 0.1 * rng.standard_normal((6, 12))
+    for name in ("energy", "forces", "stiffness", "stress"):
+        a, b = getattr(c, name)(D, u), getattr(nb, name)(D, u)
+        assert relative_error(a, b) < 1e-12, name
+
+
 def cube(viscous, pulled, amplitude_end=0.02, steps=STEPS):
     return Scene.from_string(cube_text(viscous, pulled, amplitude_end, steps))
 
