@@ -39,6 +39,7 @@ from ..runtime.base.samples import random_elements
 from .bench_assembly import add_assembly_command
 from .bench_history import add_history_command
 from .bench_formulations import add_formulations_command
+from .bench_laws import add_laws_command
 from .bench_integrators import add_integrators_command
 from .bench_organ import add_organ_command
 from .bench_springs import add_springs_command
@@ -530,6 +531,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     add_organ_command(sub)
     add_history_command(sub)
     add_formulations_command(sub)
+    add_laws_command(sub)
     add_springs_command(sub)
     add_shells_command(sub)
     add_cutting_command(sub)

@@ -7,6 +7,7 @@
     tensormass demo                               the embedded default scene (a mixed bar under gravity)
     tensormass bench kernels|compile|steps        kernel throughput against a classic loop; compile budget; steps
     tensormass bench organ|history|formulations   gmsh organs and solvers; history cost; formulations' cost
+    tensormass bench laws                         a step with Prony branches or fibres against the elastic one
     tensormass report accuracy|stability --out D  error against run time; stiff and extreme cases
     tensormass plot SUMMARY.json [-o PNG]         history curves of a run (probes, energies, reactions, solver)
     tensormass batch SCENES... [--vary K=V,..]    scenes x variations as tasks on dask.distributed, one table

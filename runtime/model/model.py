@@ -68,6 +68,7 @@ class Part:
     rotary: np.ndarray | None = None   # (n,) rotary inertia per unit mass (m^2) of nodes with rotations (shells)
     # viscous parts (laws/viscous.py): (tau, beta), each (n, n_branches), of their Prony branches
     branches: tuple | None = None
+    fibres: np.ndarray | None = None   # (n, 3) unit fibre direction of a law with directions (laws/hgo.py)
     # per cell and node: its lumped mass and its share of the body force integral int N_a rho dV
     # (zero rows for inactive cells), kept so a topology change re-sums nodes locally (runtime.change.cutting)
     cell_masses: np.ndarray | None = None
@@ -171,6 +172,12 @@ def _material_kernels(mesh, materials, adapt, index) -> set:
         if any(getattr(materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
             triples.add((element, volumetric_functions(law)[1], quad))
     return triples
+
+
+def _first_direction(law: str, params: dict):
+    """(n, 3) the first fibre direction of a law with directions, per cell (the fibre_stretch field)."""
+    names = laws.get(law).directions
+    return np.column_stack([params[f"{names[0]}_{c}"] for c in "xyz"]) if names else None
 
 
 def _viscous_members(materials, members) -> bool:
@@ -335,7 +342,7 @@ class Model:
                 # a shell node's rotary inertia per unit mass: h^2 / 12 (runtime.assembly.mass)
                 rotary = params["thickness"] ** 2 / 12 if laws.is_shell(name) else None
                 parts.append(Part(element, name, quad, kernel, cells, cell_ids, D, volume, dofs, rho, active,
-                                  rotary=rotary, branches=branches))
+                                  rotary=rotary, branches=branches, fibres=_first_direction(name, params)))
             if len(reach) > 1:
                 self.groups.append(LawGroup(list(range(first, len(parts))), list(reach),
                                             np.zeros(len(cells), dtype=np.int64)))

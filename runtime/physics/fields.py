@@ -77,6 +77,8 @@ FIELDS = {f.name: f for f in (
           other="point", single=True),
     Field("green_lagrange", "Green-Lagrange strain E = (F^T F - I)/2, 9 components row-major", "1", "tensor", _CELL,
           other="point", single=True),
+    Field("fibre_stretch", "stretch |F a| of the cell's fibre direction a (laws with fibres: hgo; 0 elsewhere)",
+          "1", "scalar", _CELL, other="point"),
     Field("det_F_min", "smallest det F (volume ratio J) over the cell's integration points", "1", "scalar",
           _CELL, single=True),
     Field("energy_density", "strain energy density W per unit rest volume", "J/m^3", "scalar", _CELL,
@@ -226,8 +228,9 @@ class FieldEvaluator:
 
     # -- the pieces ---------------------------------------------------------------------------
     def _records(self, u, asked):
-        """Yields (cell ids, v (n, q), W, F3 (n, q, 3, 3), P3) of the active cells, part by part in
-        chunks of CHUNK elements (the temporaries of a frame stay small on big meshes)."""
+        """Yields (cell ids, v (n, q), W, F3 (n, q, 3, 3), P3, fibre direction (n, 3) or None) of the
+        active cells, part by part in chunks of CHUNK elements (the temporaries of a frame stay small
+        on big meshes)."""
         model = self.model
         U = model.nodal(np.asarray(u, dtype=float).reshape(-1))
         couplings = {c.part_index: c for c in getattr(model, "couplings", [])}
@@ -242,6 +245,9 @@ class FieldEvaluator:
             if not has_stress(kernel):
                 raise _no_stress(part, asked)
             layout, d = kernel.stress_record["offsets"], kernel.dim
+            fibres = getattr(part, "fibres", None)
+            if fibres is not None and part.index is not None:
+                fibres = fibres[part.index]
             for start in range(0, part.n_active, CHUNK):
                 rows = slice(start, start + CHUNK)
                 ids = part.cell_ids_active[rows]
@@ -254,7 +260,7 @@ class FieldEvaluator:
                 W = S[..., layout["W"]]
                 if coupling is not None:
                     self._add_volumetric(coupling, row_of[start:start + len(ids)], pressure, density, U, W, P3)
-                yield ids, S[..., layout["v"]], W, F3, P3
+                yield ids, S[..., layout["v"]], W, F3, P3, None if fibres is None else fibres[rows]
 
     @staticmethod
     def _add_volumetric(coupling, rows, pressure, density, U, W, P3):
@@ -293,8 +299,8 @@ class FieldEvaluator:
         if wanted:
             volume = np.zeros(n_cells)
             values = {n: None for n in wanted}
-            for ids, v, W, F, P in self._records(u, wanted):
-                per_point = _derive(wanted, W, F, P)
+            for ids, v, W, F, P, a in self._records(u, wanted):
+                per_point = _derive(wanted, W, F, P, a)
                 weight = v.sum(axis=1)
                 volume[ids] = weight
                 for n in wanted:
@@ -358,9 +364,13 @@ def _tensor(S, layout, name: str, d: int, out_of_plane: float | None = None) -> 
     return T
 
 
-def _derive(names, W, F, P) -> dict:
-    """The requested fields at every point from W (n, q), F and P (n, q, 3, 3)."""
+def _derive(names, W, F, P, a=None) -> dict:
+    """The requested fields at every point from W (n, q), F and P (n, q, 3, 3) (and the cells' fibre
+    directions a (n, 3), or None)."""
     out = {}
+    if "fibre_stretch" in names:
+        out["fibre_stretch"] = (np.zeros(W.shape) if a is None else
+                                np.linalg.norm(np.einsum("nqab,nb->nqa", F, a), axis=-1))
     J = np.linalg.det(F)
     if "det_F_min" in names:
         out["det_F_min"] = J

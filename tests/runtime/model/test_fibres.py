@@ -177,3 +177,28 @@ def test_the_myocardium_example_twists_under_tension(tmp_path):
         reaction = summary["reactions"]["pulled"]
         moments[variant] = abs(reaction["moment"][0]) / (reaction["force"][0] * 0.01)   # per force x thickness
     assert moments["helical"] > 1e-3 > 1e3 * moments["aligned"]
+
+
+def test_the_fibre_stretch_field():
+    """fibre_stretch = |F a|: the imposed 1.25 pulled along the fibres; across them, the lateral
+    stretch of the principal-stretch solution; 0 in cells whose law has no fibres."""
+    from tensormass.runtime.physics import fields
+    sim = Simulation(Scene.from_string(cube_text(0)))
+    sim.run()
+    _, cells = fields.evaluate(sim.model, sim.displacement, ["fibre_stretch"])
+    np.testing.assert_allclose(cells["fibre_stretch"], 1.25, rtol=1e-12)
+    sim = Simulation(Scene.from_string(cube_text(1, dispersion=0.1)))
+    sim.run()
+    _, cells = fields.evaluate(sim.model, sim.displacement, ["fibre_stretch"])
+
+    def free(s):
+        p = principal_stress([s[0], 1.25, s[1]], 0.1)
+        return [p[0], p[2]]
+    lateral = fsolve(free, [1.0, 1.0], xtol=1e-12)[0]
+    np.testing.assert_allclose(cells["fibre_stretch"], lateral, rtol=1e-6)
+    elastic = cube_text(0).replace('law = "hgo"', 'law = "neohookean"').replace("fibres = [1, 0, 0]", "")
+    for key in ("k1 = 2000.0", "k2 = 1.5", "dispersion = 0.0"):
+        elastic = elastic.replace(key, "")
+    sim = Simulation(Scene.from_string(elastic))
+    sim.run()
+    assert np.all(fields.evaluate(sim.model, sim.displacement, ["fibre_stretch"])[1]["fibre_stretch"] == 0)
