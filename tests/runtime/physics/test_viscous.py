@@ -202,3 +202,21 @@ def test_an_implicit_euler_run_with_viscous_branches():
         return x
     elastic, viscous = swing(()), swing([(0.05, 3.0)])
     assert np.abs(np.diff(viscous[-10:])).max() < np.abs(np.diff(elastic[-10:])).max()
+
+
+def test_the_liver_example_relaxes(tmp_path):
+    """examples/tissue/liver_relaxation.toml through the CLI: the tool's force peaks when the press
+    ends (0.1 s) and relaxes monotonically while it is held, towards the relaxed modulus' force."""
+    import json
+    from pathlib import Path
+    from tensormass.apps.cli import main
+    example = Path(__file__).resolve().parents[3] / "examples" / "tissue" / "liver_relaxation.toml"
+    out = tmp_path / "summary.json"
+    assert main(["run", str(example), "--quiet", "--json", str(out)]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["status"] == "ok"
+    force = -np.array(summary["per_step"]["reactions"]["tool"]["force"])[:, 2]
+    t = np.array(summary["per_step"]["time"])
+    peak = int(np.argmax(force))
+    assert t[peak] == pytest.approx(0.1)
+    assert np.all(np.diff(force[peak:]) < 0) and force[-1] < 0.75 * force[peak]
