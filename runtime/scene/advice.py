@@ -164,4 +164,30 @@ def scene_advice(scene, mesh=None) -> list:
     size = body_size_advice(scene, mesh)
     if size is not None:
         advice.append(size)
+    for i, material in enumerate(scene.materials):
+        text = _prony_times(f"material[{i}].viscous", material, scene.solver)
+        if text is not None:
+            advice.append(text)
     return advice
+
+
+def _prony_times(key: str, material, solver) -> str | None:
+    """Prony branches the run cannot see: every relaxation time far below the step (relaxed within a
+    step: the law responds as if relaxed) or far beyond the run (never relaxes: stiffer, not slower)."""
+    branches = getattr(material, "viscous", None)
+    if not branches:
+        return None
+    dt = float(solver.dt)
+    duration = dt * int(solver.steps)
+    fast = [tau for tau, _ in branches if tau < dt / 100]
+    slow = [tau for tau, _ in branches if tau > 100 * duration]
+    if not fast and not slow:
+        return None
+    parts = []
+    if fast:
+        parts.append(f"tau = {', '.join(f'{t:g}' for t in fast)} s relax within a step of {dt:g} s (they add "
+                     "nothing after it: lower dt to see them)")
+    if slow:
+        parts.append(f"tau = {', '.join(f'{t:g}' for t in slow)} s do not relax within the run's {duration:g} s "
+                     "(they only stiffen the law: its instantaneous modulus)")
+    return f"{key}: " + "; ".join(parts)

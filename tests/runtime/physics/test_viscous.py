@@ -220,3 +220,33 @@ def test_the_liver_example_relaxes(tmp_path):
     peak = int(np.argmax(force))
     assert t[peak] == pytest.approx(0.1)
     assert np.all(np.diff(force[peak:]) < 0) and force[-1] < 0.75 * force[peak]
+
+
+def test_advice_names_branches_the_run_cannot_see():
+    from tensormass.runtime.scene import advice
+    scene = cube(((1e-5, 1.0), (0.5, 2.0), (1e4, 1.0)), PULL)
+    lines = [a for a in advice.scene_advice(scene) if "viscous" in a]
+    assert len(lines) == 1
+    assert "tau = 1e-05 s relax within a step of 0.02 s" in lines[0]
+    assert "tau = 10000 s do not relax within the run's 1 s" in lines[0]
+    assert not [a for a in advice.scene_advice(cube(BRANCHES, PULL)) if "viscous" in a]
+
+
+def test_constant_strain_patch_of_the_step_energy():
+    """A linear displacement on affine elements: the step energy is (g W(F) + H : E) x volume, with W
+    the base law's energy density (by the base kernel) and H : E by hand."""
+    k = tm.load_kernel("tetra", "neohookean_viscous", "gauss1")
+    base = tm.load_kernel("tetra", "neohookean", "gauss1")
+    rng = np.random.default_rng(4)
+    X = random_elements("tetra", 3, seed=9)
+    A = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
+    u = np.einsum("ab,enb->ena", A - np.eye(3), X)
+    D, Db = k.constants(X, E=3.0, nu=0.3), base.constants(X, E=3.0, nu=0.3)
+    start = k.point_fields["inputs"]
+    g, h = 1.6, rng.standard_normal(6)
+    D[:, start], D[:, start + 1:start + 7] = g, h
+    E_ = 0.5 * (A.T @ A - np.eye(3))
+    pairs = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+    HE = sum((1 if a == b else 2) * h[k_] * E_[a, b] for k_, (a, b) in enumerate(pairs))
+    volume = base.point_volumes(Db).sum(axis=1)
+    assert relative_error(k.energy(D, u), g * base.energy(Db, u) + HE * volume) < 1e-12
