@@ -266,8 +266,10 @@ def viscous_names() -> list[str]:
 def source_hash(law: Law) -> str:
     """sha256 (16 hex digits) of the source of the file defining a law's energy: what a committed
     table derived from the law (generated/volumetric.py) is checked against."""
-    module = sys.modules[law.energy.__module__]
-    return hashlib.sha256(inspect.getsource(module).encode()).hexdigest()[:16]
+    h = hashlib.sha256(inspect.getsource(sys.modules[law.energy.__module__]).encode())
+    for module in law.sources:                  # the files a law's energy is built from (laws/hgo2.py: hgo.py)
+        h.update(inspect.getsource(sys.modules[module]).encode())
+    return h.hexdigest()[:16]
 
 
 @lru_cache(maxsize=None)

@@ -11,6 +11,7 @@ invariants I1 and I4, not their isochoric parts: with the isochoric I4 a fibre-r
 under hydrostatic tension does not stay spherical (Nolan, Gower, Destrade, Ogden & McGarry, J.
 Mech. Behav. Biomed. Mater. 39 (2014) 48-60).  The matrix is a nearly incompressible neo-Hookean
 solid; mu and kappa follow from E and nu of the matrix (k1, k2 and d are given by name).
+laws/hgo2.py adds a second family with the same pieces.
 
 At rest E = 0 and the fibre term has no stiffness: small strains see the isotropic matrix.  As E
 passes 0 the fibres' stiffness (k1 in d2W/dE2) switches on at once: the tangent jumps there,
@@ -20,16 +21,25 @@ from . import sympy_lazy as sp
 
 from .base import Law
 
+# the options of every HGO law: ((name, default (None: required), (low, high)), ...)
+OPTIONS = (("k1", None, (0.0, float("inf"))), ("k2", None, (1e-6, 1e3)), ("dispersion", 0.0, (0.0, 1 / 3)))
+
+
+def matrix(F, mu, kappa):
+    """The neo-Hookean matrix: mu/2 (J^(-2/3) I1 - 3) + kappa/2 ((J^2 - 1)/2 - ln J)."""
+    J = F.det()
+    return mu / 2 * (J ** sp.Rational(-2, 3) * (F.T * F).trace() - 3) + kappa / 2 * ((J**2 - 1) / 2 - sp.log(J))
+
+
+def family(F, a, k1, k2, dispersion):
+    """One fibre family of direction a: k1/(2 k2) (exp(k2 <E>^2) - 1), in tension only."""
+    C = F.T * F
+    E = dispersion * (C.trace() - 3) + (1 - 3 * dispersion) * ((a.T * C * a)[0, 0] - 1)
+    return sp.Piecewise((k1 / (2 * k2) * (sp.exp(k2 * E**2) - 1), E > 0), (0, True))
+
 
 def energy(F, mu, kappa, k1, k2, dispersion, a):
-    C = F.T * F
-    J = F.det()
-    I1 = C.trace()
-    I4 = (a.T * C * a)[0, 0]
-    matrix = mu / 2 * (J ** sp.Rational(-2, 3) * I1 - 3) + kappa / 2 * ((J**2 - 1) / 2 - sp.log(J))
-    E = dispersion * (I1 - 3) + (1 - 3 * dispersion) * (I4 - 1)
-    fibres = sp.Piecewise((k1 / (2 * k2) * (sp.exp(k2 * E**2) - 1), E > 0), (0, True))
-    return matrix + fibres
+    return matrix(F, mu, kappa) + family(F, a, k1, k2, dispersion)
 
 
 def from_E_nu(E, nu):
@@ -44,6 +54,6 @@ LAW = Law(
     description="Holzapfel-Gasser-Ogden fibre-reinforced (one fibre family, dispersion d)",
     validity="large strains; fibres in tension only; undefined for inverted elements (det F <= 0)",
     requires_positive_J=True,
-    options=(("k1", None, (0.0, float("inf"))), ("k2", None, (1e-6, 1e3)), ("dispersion", 0.0, (0.0, 1 / 3))),
+    options=OPTIONS,
     directions=("a",),
 )

@@ -35,7 +35,7 @@ QUICK_KERNELS = frozenset(
     + [f"tetra_measure_{m}_gauss1" for m in ("volume", "dilatation", "green_dilatation")]
     + ["triangle_measure_volume_gauss1"]         # the one-point triangle mooney_rivlin's nodal pressure
     + ["tetra_mss_discrete", "triangle_mss_discrete"]           # the lattice laws on their cheap elements
-    + ["tetra_hgo_gauss1"])                                     # fibres: the cheapest of their kernels
+    + ["tetra_hgo_gauss1", "tetra_hgo2_gauss1"])               # fibres: the cheapest of their kernels
 # Generated numba modules (5 to 30 s of numba compile each, cold): the tests about numba itself
 # (C = numba, the numba backend's own behaviour, the benchmarks that time both backends) load
 # these; every other test runs the default backend (C).
@@ -113,9 +113,10 @@ def catalogue_parameters(law: str) -> dict:
     return {"E": 2.0, "nu": 0.3, **({"thickness": 0.1} if laws.is_shell(law) else {}), **law_inputs(law)}
 
 
-# A fibre direction in the plane z = 0 (2D elements take in-plane fibres) whose squared length is 1
+# Fibre directions in the plane z = 0 (2D elements take in-plane fibres) whose squared length is 1
 # in floating point: at rest the fibre strain is then exactly 0 and the fibres carry nothing.
 FIBRE = (0.6, 0.8, 0.0)
+FIBRES = (FIBRE, (-0.8, 0.6, 0.0))          # a law's first and second direction
 
 
 def law_inputs(law: str) -> dict:
@@ -127,7 +128,7 @@ def law_inputs(law: str) -> dict:
         return {}
     values = {"k1": 2.0, "k2": 1.5, "dispersion": 0.1}
     out = {name: values.get(name, default) for name, default, _ in the_law.options}
-    out.update({f"{d}_{c}": x for d in the_law.directions for c, x in zip("xyz", FIBRE)})
+    out.update({f"{d}_{c}": x for d, fibre in zip(the_law.directions, FIBRES) for c, x in zip("xyz", fibre)})
     return out
 
 

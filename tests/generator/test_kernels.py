@@ -27,10 +27,10 @@ pytestmark = pytest.mark.catalogue
 CONTINUUM = entries(law_names=laws.continuum_names(user=False))
 SAMPLE = {"tetra_stable_neohookean_gauss1", "triangle_mooney_rivlin_gauss1", "tetra10_stvk_gauss2",
           "hexahedron_neohookean_gauss2", "wedge_hooke_gauss2", "pyramid_stvk_gauss2", "triangle6_stvk_exact",
-          "quad_hooke_gauss3", "tetra_hgo_gauss1"}
+          "quad_hooke_gauss3", "tetra_hgo_gauss1", "tetra_hgo2_gauss1"}
 CATALOGUE = catalogue_selection(CONTINUUM, SAMPLE)
 IDS = [e.name for e in CATALOGUE]
-FINITE_STRAIN = ["stvk", "neohookean", "stable_neohookean", "mooney_rivlin", "hgo"]
+FINITE_STRAIN = ["stvk", "neohookean", "stable_neohookean", "mooney_rivlin", "hgo", "hgo2"]
 E, NU = 3.0, 0.3
 
 

@@ -748,7 +748,7 @@ ERRORS = [
     (with_rule(threshold="5"), r"^adapt\[0\]\.threshold: expected a number"),
     (with_rule(threshold=-1.0), r"^adapt\[0\]\.threshold: must be >= 0"),
     (with_rule(drop=("law",)), r"^adapt\[0\]\.law: missing"),
-    (with_rule(law="rubber"), r"^adapt\[0\]\.law: unknown law 'rubber'; known: cst_dkt, hgo, hooke"),
+    (with_rule(law="rubber"), r"^adapt\[0\]\.law: unknown law 'rubber'; known: cst_dkt, hgo, hgo2, hooke"),
     (with_rule(from_="rubber"), r"^adapt\[0\]\.from: unknown law 'rubber'"),
     (with_rule(from_="stvk"), r"^adapt\[0\]\.from: same law as adapt\[0\]\.law \('stvk'\)"),
     (with_rule(back=5.0), r"^adapt\[0\]\.back: must be below the threshold 5 \(got 5\)"),

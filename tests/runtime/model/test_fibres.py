@@ -202,3 +202,36 @@ def test_the_fibre_stretch_field():
     sim = Simulation(Scene.from_string(elastic))
     sim.run()
     assert np.all(fields.evaluate(sim.model, sim.displacement, ["fibre_stretch"])[1]["fibre_stretch"] == 0)
+
+
+def principal_stress_families(stretches, fibres, dispersion=0.0):
+    """dW/d(lambda_i) of HGO with any fibre families (unit vectors) for F = diag(stretches), whose
+    fibres keep F diagonal (families symmetric about the axes)."""
+    lam = np.asarray(stretches, dtype=float)
+    J, I1 = lam.prod(), (lam**2).sum()
+    out = MU / 2 * (-2 / 3 * J ** (-2 / 3) * I1 / lam + 2 * J ** (-2 / 3) * lam) + KAPPA / 2 * (J - 1 / J) * J / lam
+    for a in fibres:
+        a = np.asarray(a, dtype=float)
+        Ef = dispersion * (I1 - 3) + (1 - 3 * dispersion) * ((lam * a) ** 2).sum() - (1 - 3 * dispersion)
+        dE = 2 * dispersion * lam + (1 - 3 * dispersion) * 2 * lam * a**2
+        out = out + K1 * max(Ef, 0.0) * math.exp(K2 * max(Ef, 0.0) ** 2) * dE
+    return out
+
+
+def test_two_fibre_families_pulled_between_them():
+    """hgo2 with families at +-30 degrees from x in the x-y plane, pulled along x: the principal-stretch
+    solution with both families (y and z stretch differently, both stress-free)."""
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    families = [(c, s, 0.0), (c, -s, 0.0)]
+    text = cube_text(0).replace('law = "hgo"', 'law = "hgo2"').replace(
+        "fibres = [1, 0, 0]", f"fibres = [{list(families[0])}, {list(families[1])}]")
+    sim = Simulation(Scene.from_string(text))
+    assert sim.run().status == "ok"
+
+    def free(lateral):
+        p = principal_stress_families([1.25, *lateral], families)
+        return [p[1], p[2]]
+    lateral = fsolve(free, [0.9, 0.9], xtol=1e-12)
+    expected = principal_stress_families([1.25, *lateral], families)[0]
+    assert sim.reactions()["pulled"]["force"][0] == pytest.approx(expected, rel=1e-6)
+    assert expected > 1.2 * principal_stress_families([1.25, *lateral], [])[0]     # the fibres carry load
