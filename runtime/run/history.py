@@ -90,13 +90,19 @@ class History:
         for key in flat:
             if key not in self.columns:                 # a probe or reaction first seen now
                 self.columns[key] = [None] * n
-        for key, values in self.columns.items():
-            values.append(flat.get(key))
+        try:
+            for key, values in self.columns.items():
+                values.append(flat.get(key))
+        finally:
+            # Ctrl-C (KeyboardInterrupt) between two appends would leave columns of different
+            # lengths in the interrupted run's summary: the row is dropped whole instead
+            if any(len(values) != n + 1 for values in self.columns.values()):
+                for values in self.columns.values():
+                    del values[n:]
         if n + 1 > self.limit:
+            keep = [i for i, k in enumerate(self.columns["step"]) if k % (2 * self.stride) == 0]
+            self.columns = {key: [values[i] for i in keep] for key, values in self.columns.items()}
             self.stride *= 2
-            keep = [i for i, k in enumerate(self.columns["step"]) if k % self.stride == 0]
-            for key in self.columns:
-                self.columns[key] = [self.columns[key][i] for i in keep]
 
     def to_dict(self) -> dict:
         out = {k: list(self.columns[k]) for k in SCALAR_KEYS}

@@ -105,3 +105,22 @@ def test_two_dimensional_csv_has_one_moment_column(tmp_path):
     header, row = (tmp_path / "h.csv").read_text().splitlines()
     assert header.endswith("reaction.fixed[0].Fx,reaction.fixed[0].Fy,reaction.fixed[0].Mz [N m/m]")
     assert row.endswith("1.0,2.0,3.5")
+
+
+def test_an_interrupted_add_drops_the_row_whole():
+    """Ctrl-C between two columns' appends: every column keeps the same length (the row is dropped),
+    so the interrupted run's summary and CSV stay consistent."""
+    from tensormass.runtime.run.history import History
+
+    class Interrupting(list):
+        def append(self, value):
+            raise KeyboardInterrupt
+
+    h = History()
+    row = {"step": 1, "time": 0.1, "newton": 1, "linear": 1, "wall": 0.01, "elastic": 1.0}
+    h.add(row)
+    keys = list(h.columns)
+    h.columns[keys[3]] = Interrupting(h.columns[keys[3]])
+    with pytest.raises(KeyboardInterrupt):
+        h.add({**row, "step": 2})
+    assert {len(v) for v in h.columns.values()} == {1}
