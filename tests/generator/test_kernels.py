@@ -15,7 +15,6 @@ import sympy as sp
 import tensormass as tm
 from tensormass import laws
 from tensormass.generator.catalogue import entries
-from tensormass.generator.derivatives import law_derivatives
 
 from helpers import FULL_CATALOGUE, QUICK_KERNELS, QUICK_NUMBA_KERNELS, catalogue_selection, fd_gradient, law_inputs, random_elements, reference_nodes, relative_error
 
@@ -66,10 +65,15 @@ def rotation(dim, angle=1.1, axis=(1.0, 2.0, 2.0)):
 
 
 def law_energy_density(law_name, dim):
-    """W(F) of the law as a numpy function of a dim x dim F, by lambdify (independent of the kernels)."""
-    d = law_derivatives(laws.get(law_name), dim)
-    flat = [s for row in d.F for s in row]
-    fn = sp.lambdify(flat + list(d.params), d.W, "math")
+    """W(F) of the law as a numpy function of a dim x dim F, by lambdify (independent of the kernels;
+    W alone: its derivatives take sympy seconds on the fibre laws)."""
+    from tensormass.generator.kinematics import F_symbols, embed_plane_strain
+    law = laws.get(law_name)
+    F = F_symbols(dim)
+    flat = [s for row in F for s in row]
+    symbols = law.symbols()
+    W = law.W(embed_plane_strain(F), symbols)
+    fn = sp.lambdify(flat + [symbols[p] for p in law.inputs], W, "math")
     params = laws.get(law_name).native_parameters(E=E, nu=NU, **law_inputs(law_name))
     return lambda F: fn(*np.ravel(F), *[float(params[p]) for p in laws.get(law_name).inputs])
 
