@@ -89,7 +89,7 @@ def cmd_list(args) -> int:
 
 def cmd_generate(args) -> int:
     from ..generator import shape_tables, volumetric             # deferred: sympy, jinja2, 0.55 s
-    from ..generator.catalogue import catalogue_laws, entries
+    from ..generator.catalogue import COMMITTED_VISCOUS, catalogue_laws, entries
     from ..generator.elements import ELEMENTS
     from ..generator.pipeline import generate_all
     from .. import laws
@@ -97,9 +97,11 @@ def cmd_generate(args) -> int:
     # --law takes names and law files (FILE.py: a law outside the package, laws.load_file);
     # no --law: the whole catalogue of built-in laws, the formulations' volume-measure kernels too
     law_names = [laws.load_file(v).name if v.endswith(".py") else v for v in _names(args.law, None, "law") or []]
-    selected = entries(_names(args.element, ELEMENTS, "element"),
-                       law_names or catalogue_laws(user=False),
-                       _names(args.quadrature, None, "quadrature"))
+    elements, quadratures = _names(args.element, ELEMENTS, "element"), _names(args.quadrature, None, "quadrature")
+    selected = entries(elements, law_names or catalogue_laws(user=False), quadratures)
+    if not law_names:                      # the committed viscous step kernels (generator.catalogue)
+        selected = sorted(selected + [e for e in COMMITTED_VISCOUS if (elements is None or e.element in elements)
+                                      and (quadratures is None or e.quadrature in quadratures)])
     backends = _names(args.backend, BACKENDS, "backend") or list(BACKENDS)
     unknown = sorted(set(backends) - set(BACKENDS))
     if unknown:

@@ -66,9 +66,15 @@ def catalogue_laws(user: bool = True) -> list[str]:
     return laws.names(user) + laws.measure_names() + (laws.viscous_names() if user else [])
 
 
+# Viscous step kernels (laws/viscous.py) are generated on first use; the one the tissue examples and
+# the quick tests run is committed too, so that a cold run compiles it without deriving it first.
+COMMITTED_VISCOUS = (Entry("tetra", "neohookean_viscous", "gauss1"),)
+
+
 def catalogue() -> list[Entry]:
-    """What generated/ holds: every built-in material law's entries and the volume measures' (laws/measures.py)."""
-    return entries(None, catalogue_laws(user=False))
+    """What generated/ holds: every built-in material law's entries, the volume measures'
+    (laws/measures.py) and COMMITTED_VISCOUS."""
+    return sorted(entries(None, catalogue_laws(user=False)) + list(COMMITTED_VISCOUS))
 
 
 def _check(kind, given, known):
