@@ -85,6 +85,9 @@ class Mesh:
     # nodes created by refinement at edge midpoints / face centres: rows (node, 2 or 4 parents, -1
     # padded); runtime.physics.hanging finds those that hang on an unrefined neighbour.  None: no such node
     midpoints: np.ndarray | None = None
+    # numeric cell data of the file (not its tags), per cell in block order: name -> (n_cells, k)
+    # (a fibre field: [[material]] fibres = "NAME"); a mesh made from another (refined, cut) has none
+    cell_data: dict = field(default_factory=dict)
 
     def __post_init__(self):
         pts = np.asarray(self.points, dtype=np.float64)

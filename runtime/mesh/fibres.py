@@ -5,6 +5,7 @@ A [[material]]'s ``fibres`` gives one entry per direction the law declares (Law.
 - ``"FILE.py:FUNCTION"``: a Python function of the cells' rest centroids, an (n, dim) array, returning
   an (n, 3) array (or (n, 2) in 2D; one vector: every cell), loaded from a file relative to the
   scene's folder;
+- ``"NAME"``: the mesh file's cell data NAME, a vector per cell (Mesh.cell_data);
 - in Python, any callable of the same form.
 Each direction is normalised per cell; a zero, NaN or wrongly shaped result is refused naming the
 cells.  They are evaluated where the model builds its parts (at the centroids of the mesh it has,
@@ -22,10 +23,16 @@ import numpy as np
 from ..base.errors import TensormassError
 
 
+class CellData(str):
+    """A fibre entry naming the mesh file's cell data (checked against the mesh when the model is built)."""
+
+
 def parse_entry(value, what: str, base_dir=None):
-    """One fibre entry of a scene: a tuple of 2 or 3 numbers, or the function a "FILE.py:FUNCTION"
-    string names (loaded now: a missing file or function is a scene error)."""
+    """One fibre entry of a scene: a tuple of 2 or 3 numbers, the function a "FILE.py:FUNCTION"
+    string names (loaded now: a missing file or function is a scene error), or CellData(NAME)."""
     if isinstance(value, str):
+        if ".py:" not in value and value.strip() and ":" not in value:
+            return CellData(value)
         return load_function(value, what, base_dir)
     if callable(value):
         return value
@@ -69,9 +76,17 @@ def load_function(text: str, what: str, base_dir=None):
     return function
 
 
-def directions(entry, centroids: np.ndarray, what: str, cell_ids=None) -> np.ndarray:
-    """(n, 3) unit vectors: the entry evaluated at the cells' rest centroids (n, dim)."""
+def directions(entry, centroids: np.ndarray, what: str, cell_ids=None, cell_data=None) -> np.ndarray:
+    """(n, 3) unit vectors: the entry evaluated at the cells' rest centroids (n, dim); a CellData
+    entry reads the mesh's cell data (cell_data: name -> (n_cells, k)) at cell_ids."""
     n, dim = centroids.shape
+    if isinstance(entry, CellData):
+        cell_data = cell_data or {}
+        if entry not in cell_data:
+            have = ", ".join(sorted(cell_data)) or "none"
+            raise TensormassError(f"{what}: the mesh has no cell data {str(entry)!r} (it has: {have}); a "
+                                  "refined or cut mesh keeps none")
+        entry = cell_data[entry][np.asarray(cell_ids)]
     if callable(entry):
         try:
             raw = entry(np.array(centroids))

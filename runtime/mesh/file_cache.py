@@ -50,7 +50,7 @@ def _code_digest() -> str:
 
 
 def fingerprint(mesh: Mesh) -> str:
-    """A digest of what the cache keeps of a mesh (points, cells, tags, groups): tells the mesh read
+    """A digest of what the cache keeps of a mesh (points, cells, tags, groups, cell data): tells the mesh read
     from a file from one changed or put in its place since."""
     h = hashlib.sha256()
     for name, array in _pack(mesh).items():
@@ -112,6 +112,9 @@ def _pack(mesh: Mesh) -> dict:
         head["groups"].append({"name": g.name, "id": g.id, "dim": g.dim, "cells": types})
     if mesh.midpoints is not None:
         arrays["midpoints"] = mesh.midpoints
+    head["cell_data"] = sorted(mesh.cell_data)
+    for i, name in enumerate(head["cell_data"]):
+        arrays[f"cell_data{i}"] = mesh.cell_data[name]
     arrays["head"] = np.frombuffer(json.dumps(head).encode(), dtype=np.uint8)
     return arrays
 
@@ -123,4 +126,6 @@ def _unpack(z) -> Mesh:
     groups = [Group(g["name"], g["id"], g["dim"], np.asarray(z[f"group{i}_ids"]),
                     {t: np.asarray(z[f"group{i}_cells{j}"]) for j, t in enumerate(g["cells"])})
               for i, g in enumerate(head["groups"])]
-    return Mesh(np.asarray(z["points"]), blocks, groups, np.asarray(z["midpoints"]) if head["midpoints"] else None)
+    cell_data = {name: np.asarray(z[f"cell_data{i}"]) for i, name in enumerate(head.get("cell_data", []))}
+    return Mesh(np.asarray(z["points"]), blocks, groups, np.asarray(z["midpoints"]) if head["midpoints"] else None,
+                cell_data)

@@ -111,7 +111,33 @@ def read_mesh(path) -> Mesh:
         if cells is not None and cells.size and (cells.min() < 0 or cells.max() >= len(points)):
             raise MeshError(f"{path}: {m.cells[i].type} cells (block {i} of the file) refer to nodes outside "
                             f"0..{len(points) - 1}")
-    return Mesh(points, blocks, read_groups(m, all_tags, solid_ids, lower))
+    return Mesh(points, blocks, read_groups(m, all_tags, solid_ids, lower), cell_data=_cell_data(m, solid_ids))
+
+
+def _cell_data(m, solid_ids) -> dict:
+    """The file's numeric cell data on its solid cells, per cell in block order: name -> (n, k) with
+    k columns (a vector field has 2 or 3); data that some solid block lacks, or of mixed widths, or
+    not numbers, is left out (a scene that names it is told which the mesh has)."""
+    n_cells = 1 + max((int(ids.max()) for ids in solid_ids if ids is not None and ids.size), default=-1)
+    out = {}
+    for name, per_block in m.cell_data.items():
+        if name in _TAG_KEYS or name.startswith("gmsh:"):
+            continue
+        values, width = np.full((n_cells, 3), np.nan), None
+        try:
+            for block, ids in zip(per_block, solid_ids):
+                if ids is None:
+                    continue
+                data = np.asarray(block, dtype=np.float64).reshape(len(ids), -1)
+                if width not in (None, data.shape[1]) or data.shape[1] > 3:
+                    raise ValueError(name)
+                width = data.shape[1]
+                values[ids, :width] = data
+        except (TypeError, ValueError):
+            continue
+        if width is not None:
+            out[name] = np.ascontiguousarray(values[:, :width])
+    return out
 
 
 def read_meshio(path):

@@ -420,9 +420,11 @@ class Model:
                                   f"({', '.join(names)}): [[material]] fibres")
         cells = self.mesh.blocks[block].cells[ids]
         centroids = self.mesh.points[cells].mean(axis=1)
+        cell_ids = sum(len(b) for b in self.mesh.blocks[:block]) + np.asarray(ids)
         out = {}
         for name, entry in zip(names, entries):
-            a = _fibres.directions(entry, centroids, f"material[{m}].fibres ({name})")
+            a = _fibres.directions(entry, centroids, f"material[{m}].fibres ({name})", cell_ids,
+                                   getattr(self.mesh, "cell_data", None))
             out.update({f"{name}_{c}": a[:, k] for k, c in enumerate("xyz")})
         return out
 

@@ -154,8 +154,9 @@ KEYS = (
         doc="Prony branches [{tau = 0.1, beta = 0.5}, ...]: relaxation time tau (s, > 0) and stiffness beta "
         "(>= 0) over the relaxed law's; the law's E and nu are the relaxed (long-term) ones."),
     Key("material", "fibres", "array or string", unit="1",
-        doc="A law with fibre directions (hgo): one per direction, a vector [1, 0, 0] or \"FILE.py:FUNCTION\" "
-        "(a function of the cells' rest centroids, (n, dim), returning (n, 3)); normalised per cell."),
+        doc="A law with fibre directions (hgo, hgo2): one per direction, a vector [1, 0, 0], \"FILE.py:FUNCTION\" "
+        "(a function of the cells' rest centroids, (n, dim), returning (n, 3)) or \"NAME\" (the mesh file's "
+        "cell data NAME, a vector per cell); normalised per cell."),
     # -- [[fixed]] -------------------------------------------------------------------------------
     Key("fixed", "box", _BOX, unit="m", doc="The nodes inside the box; box or region (or both) is required."),
     Key("fixed", "region", _REGION, doc="The nodes of a mesh group (name or id)."),

@@ -359,8 +359,9 @@ class Parser(ValueParser):
         if "fibres" not in t:
             if count:
                 raise SceneError(f"{key}.fibres: missing; law {law.name!r} needs {count} fibre direction"
-                                 f"{'s' if count > 1 else ''} per cell: a vector such as [1, 0, 0], or "
-                                 "\"FILE.py:FUNCTION\" (a function of the cells' centroids)")
+                                 f"{'s' if count > 1 else ''} per cell: a vector such as [1, 0, 0], "
+                                 "\"FILE.py:FUNCTION\" (a function of the cells' centroids) or \"NAME\" (the "
+                                 "mesh file's cell data)")
             return None
         if not count:
             raise SceneError(f"{key}.fibres: law {law.name!r} has no fibre directions; remove fibres")

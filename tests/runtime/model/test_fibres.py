@@ -235,3 +235,27 @@ def test_two_fibre_families_pulled_between_them():
     expected = principal_stress_families([1.25, *lateral], families)[0]
     assert sim.reactions()["pulled"]["force"][0] == pytest.approx(expected, rel=1e-6)
     assert expected > 1.2 * principal_stress_families([1.25, *lateral], [])[0]     # the fibres carry load
+
+
+def test_fibres_from_the_mesh_files_cell_data(tmp_path):
+    """fibres = "NAME": the mesh file's cell data, a vector per cell (here +x and -x alternately:
+    the same fibres) gives the constant vector's stress; the mesh cache keeps the field; a name the
+    file lacks is refused, naming those it has."""
+    import meshio
+    from tensormass.runtime.mesh.bars import generate_bar
+    mesh = generate_bar((1.0, 1.0, 1.0), (1, 1, 1), "tetra")
+    n = len(mesh.blocks[0])
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    vectors = np.column_stack([2.0 * sign, np.zeros(n), np.zeros(n)])
+    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.blocks[0].cells)],
+                                                    cell_data={"fibres": [vectors], "other": [np.ones(n)]}))
+    text = cube_text(0).replace('generate = "bar"\nsize = [1.0, 1.0, 1.0]\ncells = [1, 1, 1]\nelement = "tetra"',
+                                'file = "cube.vtu"').replace("fibres = [1, 0, 0]", 'fibres = "fibres"')
+    for attempt in range(2):                       # the second read comes from the mesh cache
+        scene = Scene.from_string(text, base_dir=tmp_path)
+        sim = Simulation(scene)
+        sim.run()
+        assert sim.reactions()["pulled"]["force"][0] == pytest.approx(along(1.25, 0.0), rel=1e-6)
+        np.testing.assert_array_equal(sim.model.mesh.cell_data["fibres"], vectors)
+    with pytest.raises(TensormassError, match=r"no cell data 'fibre' \(it has: fibres, other\)"):
+        Simulation(Scene.from_string(text.replace('fibres = "fibres"', 'fibres = "fibre"'), base_dir=tmp_path))
