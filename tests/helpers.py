@@ -145,3 +145,20 @@ def catalogue_elements(element: str, law: str, quadrature: str, n: int, seed: in
         Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
         return X @ Q.T + rng.standard_normal(3)
     return random_elements(element, n, seed=seed, straight=quadrature == "exact")
+
+
+# A unit cube of tetrahedra in uniaxial stress (the tissue tests): its mesh, and rollers on the faces
+# x = 0, y = 0 and z = 0 (each holds its normal component only), as scene TOML.
+UNIT_CUBE_TOML = """
+[mesh]
+generate = "bar"
+size = [1.0, 1.0, 1.0]
+cells = [1, 1, 1]
+element = "tetra"
+"""
+ROLLERS_TOML = "".join(f"""
+[[fixed]]
+box = {[[-1] * a + [-0.01] + [-1] * (2 - a), [2] * a + [0.01] + [2] * (2 - a)]}
+components = [{a}]
+""" for a in range(3))
+

@@ -12,6 +12,8 @@ from tensormass.runtime.mesh import fibres
 from tensormass.runtime.run.simulation import Simulation
 from tensormass.runtime.scene.scene import Scene
 
+from helpers import ROLLERS_TOML, UNIT_CUBE_TOML
+
 E, NU, K1, K2 = 3000.0, 0.45, 2000.0, 1.5
 MU, KAPPA = E / (2 * (1 + NU)), E / (3 * (1 - 2 * NU))
 
@@ -50,17 +52,7 @@ def cube_text(pull_axis, fibre="[1, 0, 0]", dispersion=0.0):
     box[0][pull_axis], box[1][pull_axis] = 0.99, 1.01
     displacement = [0.0, 0.0, 0.0]
     displacement[pull_axis] = 0.25
-    rollers = "".join(f"""
-[[fixed]]
-box = {[[-1] * a + [-0.01] + [-1] * (2 - a), [2] * a + [0.01] + [2] * (2 - a)]}
-components = [{a}]
-""" for a in range(3))
-    return f"""
-[mesh]
-generate = "bar"
-size = [1.0, 1.0, 1.0]
-cells = [1, 1, 1]
-element = "tetra"
+    return f"""{UNIT_CUBE_TOML}
 [[material]]
 law = "hgo"
 quadrature = "gauss1"
@@ -70,7 +62,7 @@ k1 = {K1}
 k2 = {K2}
 dispersion = {dispersion}
 fibres = {fibre}
-{rollers}
+{ROLLERS_TOML}
 [[fixed]]
 name = "pulled"
 box = {box}

@@ -9,7 +9,7 @@ from tensormass.runtime.base.errors import SceneError
 from tensormass.runtime.run.simulation import Simulation
 from tensormass.runtime.scene.scene import Scene
 
-from helpers import fd_gradient, random_elements, relative_error
+from helpers import ROLLERS_TOML, UNIT_CUBE_TOML, fd_gradient, random_elements, relative_error
 
 E, NU = 3000.0, 0.3
 BRANCHES = [(0.5, 2.0), (0.05, 1.0)]          # (tau s, beta): long-term E, instantaneous 4 E
@@ -68,17 +68,7 @@ def cube_text(viscous, pulled, amplitude_end=0.02, steps=STEPS):
     """A unit cube of tetrahedra in uniaxial stress: rollers on three faces, `pulled` on x = 1 (a
     prescribed displacement or a traction), reached at the load factor amplitude_end and held."""
     branches = ", ".join(f"{{tau = {t}, beta = {b}}}" for t, b in viscous)
-    rollers = "".join(f"""
-[[fixed]]
-box = {[[-1] * a + [-0.01] + [-1] * (2 - a), [2] * a + [0.01] + [2] * (2 - a)]}
-components = [{a}]
-""" for a in range(3))
-    return f"""
-[mesh]
-generate = "bar"
-size = [1.0, 1.0, 1.0]
-cells = [1, 1, 1]
-element = "tetra"
+    return f"""{UNIT_CUBE_TOML}
 [[material]]
 law = "neohookean"
 quadrature = "gauss1"
@@ -89,7 +79,7 @@ nu = {NU}
 name = "step"
 factor = [0.0, {amplitude_end}, 1.0]
 value = [0.0, 1.0, 1.0]
-{rollers}
+{ROLLERS_TOML}
 {pulled}
 [solver]
 kind = "static"
