@@ -126,6 +126,7 @@ class Parser(ValueParser):
             raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
                              "rules yet")
         _check_viscous(materials, solver, topology, adapt)
+        _check_cell_data_fibres(materials, topology, adapt)
         if (contact is not None or obstacles) and (topology or any(a.action == "refine" for a in adapt)):
             what = f"[[{topology[0].kind}]]" if topology else "[[adapt]] action = \"refine\""
             raise SceneError(f"contact: cannot be combined with {what} (a contact surface that changes during the "
@@ -846,6 +847,16 @@ def _law_error(key, E, nu, exc) -> str:
 
 
 MAX_BRANCHES = 20
+
+
+def _check_cell_data_fibres(materials, topology, adapt) -> None:
+    """Fibres read from the mesh file's cell data stay on the cells of the file: no refinement, no cuts."""
+    named = [i for i, m in enumerate(materials) if any(isinstance(e, _fibres.CellData) for e in m.fibres or ())]
+    changes = [f"[[{e.kind}]]" for e in topology] + ["[[adapt]] action = \"refine\"" for a in adapt
+                                                     if a.action == "refine"]
+    if named and changes:
+        raise SceneError(f"material[{named[0]}].fibres: fibres from the mesh file's cell data cannot be combined with "
+                         f"{changes[0]} (a changed mesh keeps no cell data); give the field as \"FILE.py:FUNCTION\"")
 
 
 def _check_viscous(materials, solver, topology, adapt) -> None:

@@ -251,3 +251,13 @@ def test_fibres_from_the_mesh_files_cell_data(tmp_path):
         np.testing.assert_array_equal(sim.model.mesh.cell_data["fibres"], vectors)
     with pytest.raises(TensormassError, match=r"no cell data 'fibre' \(it has: fibres, other\)"):
         Simulation(Scene.from_string(text.replace('fibres = "fibres"', 'fibres = "fibre"'), base_dir=tmp_path))
+
+
+def test_cell_data_fibres_with_refinement_are_refused():
+    text = cube_text(0).replace("fibres = [1, 0, 0]", 'fibres = "fibres"') + """
+[[refine]]
+step = 2
+box = [[-1, -1, -1], [2, 2, 2]]
+"""
+    with pytest.raises(SceneError, match=r"fibres from the mesh file's cell data cannot be combined with \[\[refine\]\]"):
+        Scene.from_string(text)
