@@ -31,9 +31,9 @@ class ViscousHistory:
             if plan.D is not part.D:       # the point inputs are written into the part's D in place
                 raise TensormassError(f"viscous part {part.law}: its constants are copied by the assembly "
                                       "(inactive cells?); viscous materials cannot switch laws")
-        k = lambda part: part.kernel
-        self.Q = {i: np.zeros((len(p.cells), k(p).n_points, p.branches[0].shape[1], 6)) for i, p in self.parts}
-        self.S = {i: np.zeros((len(p.cells), k(p).n_points, 6)) for i, p in self.parts}
+        # per part: Q (cells, points, branches, 6) and S (cells, points, 6), zero at rest
+        self.Q = {i: np.zeros((len(p.cells), p.kernel.n_points, p.branches[0].shape[1], 6)) for i, p in self.parts}
+        self.S = {i: np.zeros((len(p.cells), p.kernel.n_points, 6)) for i, p in self.parts}
         self._h = None                     # the step length the point inputs hold now (None: stale)
 
     # -- one step ---------------------------------------------------------------------------------
