@@ -184,6 +184,9 @@ def law_lines() -> list:
         options = {o: d for o, d, _ in getattr(law, "options", ())}
         params = ", ".join(p + (f" (default {options[p]:g})" if options.get(p) is not None else "")
                            for p in dict.fromkeys(tuple(law.parameters) + tuple(options)))
+        directions = getattr(law, "directions", ())
+        if directions:                       # given per cell by [[material]] fibres
+            params += f"; fibre direction{'s' if len(directions) > 1 else ''} {', '.join(directions)} (fibres)"
         mine = [e for e in entries.values() if e["law"] == name]
         elements = sorted({e["element"] for e in mine})
         quadratures = sorted({e["quadrature"] for e in mine})
