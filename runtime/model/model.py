@@ -167,7 +167,7 @@ def _material_kernels(mesh, materials, adapt, index) -> set:
     triples = set()
     for (element, law, quad), members in material_groups(mesh, materials, index).items():
         if _viscous_members(materials, members):
-            law = laws.kernel_law(law + "_viscous").name
+            law = laws.kernel_law(law + _VISCOUS).name
         triples.update((element, reach, quad) for reach in reachable_laws(law, adapt))
         if any(getattr(materials[m], "formulation", "displacement") != "displacement" for _, _, m in members):
             triples.add((element, volumetric_functions(law)[1], quad))
@@ -178,6 +178,9 @@ def _first_direction(law: str, params: dict):
     """(n, 3) the first fibre direction of a law with directions, per cell (the fibre_stretch field)."""
     names = laws.get(law).directions
     return np.column_stack([params[f"{names[0]}_{c}"] for c in "xyz"]) if names else None
+
+
+_VISCOUS = "_viscous"                 # laws/viscous.py: NAME_viscous
 
 
 def _viscous_members(materials, members) -> bool:
@@ -317,7 +320,7 @@ class Model:
             branches = None
             if _viscous_members(self.materials, members):   # laws/viscous.py: the step energy's kernel
                 branches = self._branches(law, members)
-                law = laws.kernel_law(law + "_viscous").name
+                law = laws.kernel_law(law + _VISCOUS).name
             reach = reachable_laws(law, self.adapt)
             if branches is not None and len(reach) > 1:
                 raise TensormassError(f"law {law!r}: viscous materials cannot switch laws ([[adapt]] switch_law)")
@@ -386,7 +389,7 @@ class Model:
         for b, ids, m in members:
             mat = self.materials[m]
             try:
-                if law == mat.law:
+                if law in (mat.law, mat.law + _VISCOUS):     # its own law, or its viscous step energy
                     values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **dict(mat.params))
                 else:                              # a law a switch_law rule can reach
                     values = switch_parameters(mat, law)

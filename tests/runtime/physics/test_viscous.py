@@ -240,3 +240,17 @@ def test_constant_strain_patch_of_the_step_energy():
     HE = sum((1 if a == b else 2) * h[k_] * E_[a, b] for k_, (a, b) in enumerate(pairs))
     volume = base.point_volumes(Db).sum(axis=1)
     assert relative_error(k.energy(D, u), g * base.energy(Db, u) + HE * volume) < 1e-12
+
+
+@pytest.mark.heavy           # hgo_viscous is generated on first use (seconds of sympy, cold)
+def test_viscous_fibres_take_the_laws_own_parameters():
+    """A viscous hgo material: its kernel (hgo_viscous) gets the material's k1, k2 and fibres, and
+    with beta = 0 it gives the elastic hgo run's force."""
+    def force(viscous):
+        text = cube_text((), PULL).replace('law = "neohookean"', 'law = "hgo"').replace(
+            "nu = 0.3", "nu = 0.3\nk1 = 2000.0\nk2 = 1.5\nfibres = [1, 0, 0]" + (
+                "\nviscous = [{tau = 0.5, beta = 0.0}]" if viscous else ""))
+        sim = Simulation(Scene.from_string(text))
+        assert sim.run().status == "ok"
+        return sim.reactions()["pulled"]["force"][0]
+    assert force(True) == pytest.approx(force(False), rel=1e-9)
