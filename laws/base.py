@@ -75,12 +75,14 @@ class Law:
         vectors = {d: sp.Matrix([symbols[f"{d}_{c}"] for c in "xyz"]) for d in self.directions}
         return self.energy(F, **scalars, **vectors, **self.point_symbols())
 
-    def native_parameters(self, E=None, nu=None, **given) -> dict[str, np.ndarray]:
+    def native_parameters(self, E=None, nu=None, incompressible=False, **given) -> dict[str, np.ndarray]:
         """Native parameters from either (E, nu) or the native names, validated; the options (their
-        defaults where not given) and the direction components given."""
+        defaults where not given) and the direction components given.  incompressible: nu = 0.5 is
+        allowed (a mixed u-p formulation, runtime.assembly.mixed), and the bulk parameter it makes
+        infinite is returned as inf."""
         options = {k: given.pop(k) for k in list(given) if k in self.option_names}
         directions = {k: given.pop(k) for k in list(given) if k in self.direction_components}
-        out = self._native(E, nu, given)
+        out = self._native(E, nu, given, incompressible)
         out.update(_options(self, options))
         for k, v in directions.items():
             value = np.asarray(v, dtype=float)
@@ -89,13 +91,15 @@ class Law:
             out[k] = value
         return out
 
-    def _native(self, E, nu, native) -> dict[str, np.ndarray]:
+    def _native(self, E, nu, native, incompressible=False) -> dict[str, np.ndarray]:
         if native and (E is not None or nu is not None):
             raise LawError(f"law {self.name!r}: give either E and nu or native parameters, not both")
         if not native and self.parameters:
             if E is None or nu is None:
                 raise LawError(f"law {self.name!r} needs E and nu (or native parameters {', '.join(self.parameters)})")
-            native = self.from_E_nu(*validate_E_nu(E, nu))
+            E, nu = validate_E_nu(E, nu, incompressible)
+            with np.errstate(divide="ignore"):     # nu = 0.5: the bulk modulus is infinite
+                native = self.from_E_nu(E, nu)
         unknown = sorted(set(native) - set(self.parameters))
         missing = [p for p in self.parameters if p not in native]
         if unknown:
@@ -106,7 +110,7 @@ class Law:
         out = {}
         for p in self.parameters:
             value = np.asarray(native[p], dtype=float)
-            if not np.all(np.isfinite(value)):
+            if not np.all(np.isfinite(value)) and not (incompressible and np.all(value == np.inf)):
                 raise LawError(f"law {self.name!r}: parameter {p} is not finite")
             out[p] = value
         return out
@@ -126,17 +130,21 @@ def _options(law, given: dict) -> dict[str, np.ndarray]:
     return out
 
 
-def validate_E_nu(E, nu):
+def validate_E_nu(E, nu, incompressible=False):
+    """E and nu as float arrays, or LawError; incompressible: nu = 0.5 is allowed (a mixed formulation)."""
     E = np.asarray(E, dtype=float)
     nu = np.asarray(nu, dtype=float)
     if not (np.all(np.isfinite(E)) and np.all(np.isfinite(nu))):
         raise LawError("E and nu must be finite numbers (got NaN or Inf)")
     if np.any(E <= 0):
         raise LawError(f"Young's modulus E must be > 0 (got {E.min():g})")
-    if np.any(nu >= 0.5) or np.any(nu <= -1.0):
-        bad = nu.max() if np.any(nu >= 0.5) else nu.min()
+    too_large = nu > 0.5 if incompressible else nu >= 0.5
+    if np.any(too_large) or np.any(nu <= -1.0):
+        bad = nu.max() if np.any(too_large) else nu.min()
+        if incompressible:
+            raise LawError(f"Poisson's ratio nu must satisfy -1 < nu <= 0.5 (got {bad:g})")
         raise LawError(f"Poisson's ratio nu must satisfy -1 < nu < 0.5 (got {bad:g}); "
-                       "nu = 0.5 is incompressible, which these displacement elements cannot represent")
+                       "nu = 0.5 is incompressible: it needs formulation = \"mixed\" (pressure unknowns)")
     return E, nu
 
 

@@ -41,6 +41,7 @@ from ..mesh.regions import (assign_materials as _assign, box_contains, box_toler
 from ..scene.types import Loads, Output, Solver
 from ..scene.formulation_check import check_element as _check_formulation_element, formulation_name
 from ..assembly.volumetric import VolumetricCoupling, volumetric_functions
+from ..assembly.mixed import MixedCoupling
 from ..scene.mesh_source import build_mesh, scene_mesh
 from ..kernels.corotational import CorotationalShell
 from ..physics.hanging import HangingNodes
@@ -148,6 +149,18 @@ class _Formulated:
         out[bulk] = np.array(params[bulk], dtype=float, copy=True)
         out[bulk][self.rows] = 0.0
         return out
+
+
+def _check_incompressible(law: str, values: dict, m: int) -> None:
+    """At nu = 0.5 only the bulk parameter of the law's volumetric split may be infinite: the mixed
+    formulation replaces that part; a law whose other parameters blow up cannot be incompressible."""
+    infinite = [p for p, v in values.items() if np.any(np.isinf(v))]
+    if not infinite:
+        return
+    bulk = volumetric_functions(law)[0]
+    if infinite != [bulk]:
+        raise TensormassError(f"material {m}: law {law!r} at nu = 0.5 makes {', '.join(p for p in infinite if p != bulk)} "
+                              f"infinite, not only its bulk parameter {bulk!r}: it cannot be made incompressible")
 
 
 # --------------------------------------------------------------------------- mesh and materials
@@ -374,6 +387,9 @@ class Model:
             start += len(ids)
         if not rows:
             return None
+        if "mixed" in names and len(names) > 1:
+            raise TensormassError(f"law {law!r} on {element}: formulation 'mixed' and {sorted(names - {'mixed'})[0]!r} "
+                                  "in one part (materials of one law and element): give them the same formulation")
         if len(reach) > 1:
             raise TensormassError(f"law {law!r} on {element}: the formulation {sorted(names)[0]!r} cannot be "
                                   "combined with [[adapt]] switch_law rules (not supported yet)")
@@ -381,7 +397,8 @@ class Model:
 
     def _build_couplings(self) -> list:
         pending, self._pending_couplings = self._pending_couplings, []
-        return [VolumetricCoupling(self, p.part, p.rows, p.formulation, p.full_params, p.materials) for p in pending]
+        return [MixedCoupling(self, p.part, p.rows, p.full_params, p.materials) if p.formulation == "mixed" else
+                VolumetricCoupling(self, p.part, p.rows, p.formulation, p.full_params, p.materials) for p in pending]
 
     def _parameters(self, law: str, members) -> dict:
         """Native law parameters, one value per cell (materials may differ within a part)."""
@@ -390,7 +407,10 @@ class Model:
             mat = self.materials[m]
             try:
                 if law in (mat.law, mat.law + _VISCOUS):     # its own law, or its viscous step energy
-                    values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **dict(mat.params))
+                    mixed = getattr(mat, "formulation", "") == "mixed" and mat.nu is not None
+                    values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, incompressible=mixed,
+                                                             **dict(mat.params))
+                    _check_incompressible(law, values, m)
                 else:                              # a law a switch_law rule can reach
                     values = switch_parameters(mat, law)
             except (laws.LawError, TensormassError) as exc:

@@ -15,6 +15,11 @@
   bending, so it is the choice for triangles (Cook's membrane, one-diagonal 32 x 32 at nu = 0.4999:
   -3.3 % from P2-P0 where nodal pressure is -5.6 %; runtime.assembly.volumetric).
 
+- "mixed": the pressure as an unknown beside the displacements (runtime.assembly.mixed), for exact
+  incompressibility (nu = 0.5) and up to it: P2-P1 (Taylor-Hood) on tetra10, P1-P1 stabilised by
+  MINI's condensed bubble on tetra, Q1-P0 on hexahedra.  Newton solves the symmetric indefinite
+  (u, p) system (runtime.physics.saddle).
+
 Wedges take both averaged formulations, but only nodal pressure cures their locking in prism
 layers: under a field in the layers' plane a linear prism's dilatation is already constant over
 the cell (it is the dilatation of its triangle), so the cell mean is the pointwise value and
@@ -38,6 +43,7 @@ FORMULATIONS = {
     "mean_dilatation": ("hexahedron", "quad", "tetra10", "triangle6", "wedge"),
     "nodal_pressure": ("tetra", "triangle", "wedge"),
     "edge_smoothed": ("triangle",),
+    "mixed": ("tetra", "tetra10", "hexahedron"),
 }
 
 # element -> the formulation that cures its locking (elements not here have none)

@@ -18,6 +18,7 @@ from ..assembly import volumetric
 from ..assembly.assembly import Assembler
 from ..base.errors import InvertedElementError, TensormassError
 from .viscous import ViscousHistory
+from .saddle import Pressures, newton_saddle
 from ..solve.amg import rigid_body_modes
 from ..solve.solvers import ConstrainedSystem, LinearSolver
 from .health import safe_norm
@@ -69,6 +70,9 @@ class Context:
         self.residual = None
         # viscous parts (laws/viscous.py): their Prony state, prepared before and committed after each step
         self.history = ViscousHistory(model, self.asm) if any(p.branches is not None for p in model.parts) else None
+        # formulation "mixed": the pressure unknowns, solved with the displacements (runtime.physics.saddle)
+        mixed = [c for c in getattr(model, "couplings", []) if c.formulation == "mixed"]
+        self.pressures = Pressures(model, mixed) if mixed else None
         self._cell_size = None
 
     def warm_up_solver(self) -> None:
@@ -345,6 +349,8 @@ def newton(ctx: Context, potential: Potential, u: np.ndarray, target_c: np.ndarr
     last certified point and backtracking from there.  Convergence: the residual
     on the free dofs below newton_tolerance x the force scale, or below the round-off floor
     (Context.roundoff_floor) after a full step."""
+    if getattr(ctx, "pressures", None) is not None:
+        return newton_saddle(ctx, potential, u, target_c, where)
     model, s = ctx.model, ctx.model.solver
     fixed, free = model.fixed_dofs, model.free_dofs
     project = ctx.project is True

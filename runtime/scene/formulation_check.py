@@ -36,6 +36,8 @@ def _why_not(formulation: str, element: str) -> str:
         return "it smooths strains over the edges of linear triangles only"
     if formulation == "nodal_pressure":
         return "it averages volumes at the nodes of linear tetrahedra, triangles and wedges only"
+    if formulation == "mixed":
+        return "its pressure spaces are made for tetra (P1-P1 stabilised), tetra10 (P2-P1) and hexahedron (Q1-P0)"
     return f"it is made for {', '.join(FORMULATIONS[formulation])}"
 
 

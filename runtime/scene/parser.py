@@ -324,7 +324,7 @@ class Parser(ValueParser):
             values = mat.native_parameters()
         except laws.LawError as exc:
             raise SceneError(_law_error(key, E, nu, exc)) from None
-        bad = [p for p, v in values.items() if not math.isfinite(v)]
+        bad = [p for p, v in values.items() if not math.isfinite(v) and not (formulation == "mixed" and v == math.inf)]
         if bad:
             raise SceneError(f"{key}: parameter {bad[0]} of law {law_name!r} is not finite")
         return mat
@@ -838,9 +838,11 @@ def _law_error(key, E, nu, exc) -> str:
     """The scene's message for a LawError of a material: the key of E or nu when laws refused them."""
     if E is not None and not E > 0:
         return f"{key}.E: Young's modulus must be > 0 (got {format_value(E)})"
-    if nu is not None and nu >= 0.5:
-        return (f"{key}.nu: Poisson's ratio must be < 0.5 (got {format_value(nu)}); nu = 0.5 is "
-                "incompressible, which these displacement elements cannot represent")
+    if nu is not None and nu > 0.5:
+        return f"{key}.nu: Poisson's ratio must be <= 0.5 (got {format_value(nu)})"
+    if nu is not None and nu == 0.5:
+        return (f"{key}.nu: nu = 0.5 is incompressible, which a displacement formulation cannot represent: "
+                "give formulation = \"mixed\" (the pressure as an unknown; tetra, tetra10, hexahedron)")
     if nu is not None and nu <= -1.0:
         return f"{key}.nu: Poisson's ratio must be > -1 (got {format_value(nu)})"
     return f"{key}: {exc}"

@@ -43,7 +43,10 @@ class Material:
         """The law's native parameters as floats (from E, nu or as given; laws validates E and nu;
         a discrete law: E, nu and its options from params)."""
         law = laws.get(self.law)
-        native = law.native_parameters(self.E, self.nu, **self.params)
+        if self.formulation == "mixed" and self.nu is not None:      # nu = 0.5 allowed: pressure unknowns
+            native = law.native_parameters(self.E, self.nu, incompressible=True, **self.params)
+        else:
+            native = law.native_parameters(self.E, self.nu, **self.params)
         return {k: float(v) for k, v in native.items()}
 
 

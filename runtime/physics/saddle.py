@@ -1,0 +1,159 @@
+"""Newton on displacements and pressures together: the mixed u-p formulation's saddle-point solve.
+
+A model with formulation "mixed" (runtime.assembly.mixed) has pressure unknowns p beside the free
+displacements.  The equations are the stationarity of the Lagrangian in both,
+
+    g(u, p) = dL/du = 0  (the equation of motion on the free dofs),   r(u, p) = dL/dp = 0  (the volume constraint),
+
+and each Newton step solves the symmetric indefinite system
+
+    [ K_ff   B_f^T ] [ d_f ]     [ g_f + K_fc d_c ]
+    [ B_f    -C    ] [ dp  ] = - [ r   + B_c d_c  ]          d_c: the fixed dofs' remaining move
+
+with a sparse LU (SuperLU, whose pivoting handles the zero block at nu = 0.5).  L has a saddle
+point, not a minimum, so the energy cannot rank trial steps: the line search halves the step until
+the scaled residual norm |g_f|^2 / f^2 + |r|^2 / V^2 decreases (Newton's direction always descends
+it), or, while boundaries move, until the state is finite.  Converged: |g_f| <= newton_tolerance x
+the force scale and |r| <= newton_tolerance x the volume, or below their round-off after a full step.
+
+The pressures live in the couplings (MixedCoupling.pressure).  A solve that fails puts back the
+pressures it started from, so a refused step or a cut time step leaves no trace.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from ..base.errors import InvertedElementError, TensormassError
+from .health import safe_norm
+
+__all__ = ["Pressures", "newton_saddle"]
+
+_MAX_HALVINGS = 30
+# volume residual below this x the volume is round-off (sums of v_q theta_q over the cells)
+_VOLUME_ROUNDOFF = 1e3 * np.finfo(float).eps
+
+
+class Pressures:
+    """The pressure unknowns of every mixed coupling of a model, as one vector."""
+
+    def __init__(self, model, couplings):
+        self.model = model
+        self.couplings = [c for c in couplings if c.formulation == "mixed"]
+        sizes = [c.n_groups for c in self.couplings]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.n = int(self.offsets[-1])
+        self.volume = float(sum(c.V.sum() for c in self.couplings))
+        self.C = sp.block_diag([c.C for c in self.couplings], format="csr")
+
+    def get(self) -> np.ndarray:
+        return np.concatenate([c.pressure for c in self.couplings]) if self.couplings else np.zeros(0)
+
+    def set(self, p: np.ndarray) -> None:
+        for c, a, b in zip(self.couplings, self.offsets[:-1], self.offsets[1:]):
+            c.pressure = np.array(p[a:b], dtype=float)
+
+    def _U(self, u):
+        m = self.model
+        return u.reshape(m.n_points, m.dofs_per_node)
+
+    def residual(self, u) -> np.ndarray:
+        """dL/dp at u and the current pressures."""
+        U = self._U(u)
+        return np.concatenate([c.constraint(U) for c in self.couplings])
+
+    def constraint_matrix(self, u) -> sp.csr_matrix:
+        U = self._U(u)
+        return sp.vstack([c.constraint_matrix(U, self.model.n_dofs) for c in self.couplings], format="csr")
+
+    def volume_error(self, u) -> float:
+        """max over the pressure groups of |integral N_a theta dV / integral N_a dV - 1|."""
+        U = self._U(u)
+        return max((float(np.abs(c.volume_ratio(U) - 1.0).max(initial=0.0)) for c in self.couplings), default=0.0)
+
+
+def _merit(g_free, r, f_scale, v_scale) -> float:
+    return (safe_norm(g_free) / f_scale) ** 2 + (safe_norm(r) / v_scale) ** 2
+
+
+def newton_saddle(ctx, potential, u, target_c, where: str):
+    """Solve g = 0, r = 0 over the free dofs and the pressures with u[fixed] -> target_c;
+    returns (u, iterations).  See the module docstring."""
+    model, s = ctx.model, ctx.model.solver
+    P = ctx.pressures
+    fixed, free = model.fixed_dofs, model.free_dofs
+    if potential.contact is not None or potential.pressure is not None or ctx.hanging is not None:
+        raise TensormassError(f"{where}: formulation 'mixed' cannot be combined with contact, follower pressure "
+                              "or hanging nodes")
+    p_start = P.get()
+    try:
+        return _iterate(ctx, potential, u.copy(), target_c, where, P, fixed, free, s)
+    except BaseException:
+        P.set(p_start)
+        raise
+
+
+def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
+    force_scale = max(potential.force_scale(u), 1e-30)
+    v_scale = max(P.volume, 1e-300)
+    g, r = potential.gradient(u), P.residual(u)
+    full, floor = False, 0.0
+    for it in range(1, s.newton_max_iterations + 1):
+        du_c = target_c - u[fixed]
+        moving = bool(np.any(du_c))
+        f_scale = max(force_scale, safe_norm(g[fixed]))
+        res_u, res_p = safe_norm(g[free]), safe_norm(r)
+        if not (np.isfinite(res_u) and np.isfinite(res_p)):
+            raise TensormassError(f"{where}: the residual is not finite (|residual| = {res_u:.3g}, volume "
+                                  f"residual {res_p:.3g}): elements inverted or loads beyond range")
+        volume_ok = res_p <= s.newton_tolerance * v_scale or res_p <= _VOLUME_ROUNDOFF * v_scale
+        if not moving and volume_ok and (res_u <= s.newton_tolerance * f_scale or (full and res_u <= floor)):
+            ctx.residual = (u, g)
+            return u, it - 1
+        data = potential.hessian(u, False)
+        d, dp = _solve(ctx, data, P.constraint_matrix(u), P.C, g, r, du_c, fixed, free)
+        floor = ctx.roundoff_floor(data)
+        ctx.newton_iterations += 1
+        m0 = _merit(g[free], r, f_scale, v_scale)
+        p0, a = P.get(), 1.0
+        for _ in range(_MAX_HALVINGS):
+            trial = u + a * d
+            P.set(p0 + a * dp)
+            try:
+                ctx.check_not_inverted(trial)
+                g_t, r_t = potential.gradient(trial), P.residual(trial)
+                m = _merit(g_t[free], r_t, f_scale, v_scale)
+            except InvertedElementError:
+                m = np.inf
+            if np.isfinite(m) and (moving or m < m0 or (a == 1.0 and m <= (1.0 + 1e-6) * m0)):
+                break
+            a *= 0.5
+        else:
+            P.set(p0)
+            raise TensormassError(f"{where}: line search failed (residual {res_u:.3e}, volume residual "
+                                  f"{res_p:.3e}); the load step is too large or elements invert: use more steps")
+        u, g, r, full = trial, g_t, r_t, a == 1.0
+    raise TensormassError(f"{where}: Newton did not converge in {s.newton_max_iterations} iterations (residual "
+                          f"{safe_norm(g[free]):.3e}, volume residual {safe_norm(r):.3e} of volume {v_scale:.3e}); "
+                          "use more steps or a larger newton_max_iterations")
+
+
+def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
+    """The step (d over all dofs, dp) of the saddle system (module docstring)."""
+    K = ctx.asm.pattern.matrix(data)
+    Kf = K[free]
+    Bf, Bc = B[:, free], B[:, fixed]
+    rhs = -np.concatenate([g[free] + Kf[:, fixed] @ du_c, r + Bc @ du_c])
+    A = sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csc")
+    try:
+        x = splu(A).solve(rhs)
+    except RuntimeError as exc:           # SuperLU: "Factor is exactly singular"
+        raise TensormassError(f"the mixed (u, p) system is singular ({exc}): a rigid-body motion left free, or "
+                              "pressure groups with no displacement to constrain") from None
+    if not np.all(np.isfinite(x)):
+        raise TensormassError("the mixed (u, p) system gave a non-finite step (a singular matrix)")
+    d = np.zeros(ctx.model.n_dofs)
+    d[free] = x[:len(free)]
+    d[fixed] = du_c
+    return d, x[len(free):]
