@@ -408,8 +408,8 @@ class Model:
             try:
                 if law in (mat.law, mat.law + _VISCOUS):     # its own law, or its viscous step energy
                     mixed = getattr(mat, "formulation", "") == "mixed" and mat.nu is not None
-                    values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, incompressible=mixed,
-                                                             **dict(mat.params))
+                    extra = {"incompressible": True} if mixed else {}
+                    values = laws.get(law).native_parameters(E=mat.E, nu=mat.nu, **extra, **dict(mat.params))
                     _check_incompressible(law, values, m)
                 else:                              # a law a switch_law rule can reach
                     values = switch_parameters(mat, law)

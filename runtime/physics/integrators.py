@@ -20,6 +20,7 @@ import scipy.sparse.linalg as spla
 from ..base.integrator_kinds import KINDS
 from ..base.errors import InvertedElementError, TensormassError
 from .health import safe_norm
+from . import saddle
 from .newton import Context, IncrementalPotential, Potential, newton
 
 __all__ = ["make_integrator", "integrator_class", "outputs_for", "Static", "ImplicitEuler", "BackwardEuler", "Explicit",
@@ -119,7 +120,8 @@ class _Dynamic(_Integrator):
         return {"time": ctx.t, "newton": ctx.newton_iterations - before}
 
     def _advance(self, u, v, t, h, depth, k):
-        history = self.ctx.history
+        history, pressures = self.ctx.history, self.ctx.pressures
+        p0 = None if pressures is None else pressures.get()     # a failed step puts them back
         try:
             if history is not None:        # viscous materials: the step's g and H (runtime.physics.viscous)
                 history.prepare(h)
@@ -131,6 +133,8 @@ class _Dynamic(_Integrator):
                 history.commit(u1)
             return u1, v1
         except TensormassError as exc:
+            if pressures is not None:
+                pressures.set(p0)
             if depth >= _MAX_DT_HALVINGS:
                 raise TensormassError(f"{self.kind}: step {k} failed even with dt = {h:.3g} "
                                       f"({self.dt:.3g} halved {depth} times): {exc}") from None
@@ -262,11 +266,15 @@ class ImplicitEuler(_Dynamic):
         dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
         if stale is not None:               # a refresh (budgeted step): what the interval it ends cost
             self._refresh(u, K, stale, h)
-        # CG starts from the previous step's dv: consecutive steps change v alike
-        dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv, extra=extra)
+        pressure_forces = 0.0
+        if ctx.pressures is not None:       # formulation "mixed": the pressures' increment with dv
+            dv, pressure_forces = saddle.linearised_step(ctx, A, h * (f - h * Kv), dv_c, u, v, h)
+        else:
+            # CG starts from the previous step's dv: consecutive steps change v alike
+            dv = ctx.solve(A, h * (f - h * Kv), dv_c, x0=self._last_dv, extra=extra)
         self._last_dv = dv if h == self.dt else None
         ctx.newton_iterations += 1
-        residual = ctx.asm.matrix(A) @ dv / h - (f - h * Kv)
+        residual = ctx.asm.matrix(A) @ dv / h - (f - h * Kv) + pressure_forces
         if extra is not None:
             residual = residual + extra @ dv / h
         v1 = v + dv

@@ -10,7 +10,8 @@ and each Newton step solves the symmetric indefinite system
     [ K_ff   B_f^T ] [ d_f ]     [ g_f + K_fc d_c ]
     [ B_f    -C    ] [ dp  ] = - [ r   + B_c d_c  ]          d_c: the fixed dofs' remaining move
 
-with a sparse LU (SuperLU, whose pivoting handles the zero block at nu = 0.5).  L has a saddle
+with a sparse LU (SuperLU, whose pivoting handles the zero block at nu = 0.5, and the non-symmetric
+stiffness of a follower pressure on an open surface).  L has a saddle
 point, not a minimum, so the energy cannot rank trial steps: the line search halves the step until
 the scaled residual norm |g_f|^2 / f^2 + |r|^2 / V^2 decreases (Newton's direction always descends
 it), or, while boundaries move, until the state is finite.  Converged: |g_f| <= newton_tolerance x
@@ -28,7 +29,7 @@ from scipy.sparse.linalg import splu
 from ..base.errors import InvertedElementError, TensormassError
 from .health import safe_norm
 
-__all__ = ["Pressures", "newton_saddle"]
+__all__ = ["Pressures", "newton_saddle", "linearised_step"]
 
 _MAX_HALVINGS = 30
 # volume residual below this x the volume is round-off (sums of v_q theta_q over the cells)
@@ -83,9 +84,8 @@ def newton_saddle(ctx, potential, u, target_c, where: str):
     model, s = ctx.model, ctx.model.solver
     P = ctx.pressures
     fixed, free = model.fixed_dofs, model.free_dofs
-    if potential.contact is not None or potential.pressure is not None or ctx.hanging is not None:
-        raise TensormassError(f"{where}: formulation 'mixed' cannot be combined with contact, follower pressure "
-                              "or hanging nodes")
+    if potential.contact is not None or ctx.hanging is not None:
+        raise TensormassError(f"{where}: formulation 'mixed' cannot be combined with contact or hanging nodes")
     p_start = P.get()
     try:
         return _iterate(ctx, potential, u.copy(), target_c, where, P, fixed, free, s)
@@ -139,13 +139,32 @@ def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
                           "use more steps or a larger newton_max_iterations")
 
 
-def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
-    """The step (d over all dofs, dp) of the saddle system (module docstring)."""
-    K = ctx.asm.pattern.matrix(data)
-    Kf = K[free]
-    Bf, Bc = B[:, free], B[:, fixed]
-    rhs = -np.concatenate([g[free] + Kf[:, fixed] @ du_c, r + Bc @ du_c])
-    A = sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csc")
+def linearised_step(ctx, A_data, b, dv_c, u, v, h):
+    """The linearly implicit Euler step (runtime.physics.integrators.ImplicitEuler) with pressures:
+
+        (M + h^2 K) dv + h B^T dp = b = h (f - h K v),     h B dv - C dp = -(r + h B v)
+
+    (the volume constraint at u + h (v + dv) to first order), solved for dp = h pi in the symmetric
+    form [[A, h^2 B^T], [h^2 B, -h^2 C]].  Sets the pressures to p + dp; returns (dv, B^T dp)."""
+    P = ctx.pressures
+    model = ctx.model
+    fixed, free = model.fixed_dofs, model.free_dofs
+    B, r = P.constraint_matrix(u), P.residual(u)
+    rhs_p = -h * (r + h * (B @ v)) - h * h * (B[:, fixed] @ dv_c)
+    A = ctx.asm.pattern.matrix(A_data)
+    Af = A[free]
+    Bf = B[:, free]
+    rhs = np.concatenate([b[free] - Af[:, fixed] @ dv_c, rhs_p])
+    M = sp.bmat([[Af[:, free], h * h * Bf.T], [h * h * Bf, -h * h * P.C]], format="csc")
+    x = _factor_solve(M, rhs)
+    dv = np.zeros(model.n_dofs)
+    dv[free], dv[fixed] = x[:len(free)], dv_c
+    dp = h * x[len(free):]
+    P.set(P.get() + dp)
+    return dv, B.T @ dp
+
+
+def _factor_solve(A, rhs):
     try:
         x = splu(A).solve(rhs)
     except RuntimeError as exc:           # SuperLU: "Factor is exactly singular"
@@ -153,6 +172,16 @@ def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
                               "pressure groups with no displacement to constrain") from None
     if not np.all(np.isfinite(x)):
         raise TensormassError("the mixed (u, p) system gave a non-finite step (a singular matrix)")
+    return x
+
+
+def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
+    """The step (d over all dofs, dp) of the saddle system (module docstring)."""
+    K = ctx.asm.pattern.matrix(data)
+    Kf = K[free]
+    Bf, Bc = B[:, free], B[:, fixed]
+    rhs = -np.concatenate([g[free] + Kf[:, fixed] @ du_c, r + Bc @ du_c])
+    x = _factor_solve(sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csc"), rhs)
     d = np.zeros(ctx.model.n_dofs)
     d[free] = x[:len(free)]
     d[fixed] = du_c

@@ -126,6 +126,7 @@ class Parser(ValueParser):
             raise SceneError(f"{topology[0].kind}: [[cut]] / [[remove]] events cannot be combined with [[adapt]] "
                              "rules yet")
         _check_viscous(materials, solver, topology, adapt)
+        _check_mixed(materials, solver, topology, adapt, contact, obstacles)
         _check_cell_data_fibres(materials, topology, adapt)
         if (contact is not None or obstacles) and (topology or any(a.action == "refine" for a in adapt)):
             what = f"[[{topology[0].kind}]]" if topology else "[[adapt]] action = \"refine\""
@@ -841,8 +842,8 @@ def _law_error(key, E, nu, exc) -> str:
     if nu is not None and nu > 0.5:
         return f"{key}.nu: Poisson's ratio must be <= 0.5 (got {format_value(nu)})"
     if nu is not None and nu == 0.5:
-        return (f"{key}.nu: nu = 0.5 is incompressible, which a displacement formulation cannot represent: "
-                "give formulation = \"mixed\" (the pressure as an unknown; tetra, tetra10, hexahedron)")
+        return (f"{key}.nu: Poisson's ratio must be < 0.5 (got 0.5) with this formulation; nu = 0.5 (incompressible) "
+                "needs formulation = \"mixed\" (the pressure as an unknown; tetra, tetra10, hexahedron)")
     if nu is not None and nu <= -1.0:
         return f"{key}.nu: Poisson's ratio must be > -1 (got {format_value(nu)})"
     return f"{key}: {exc}"
@@ -874,6 +875,31 @@ def _check_viscous(materials, solver, topology, adapt) -> None:
         what = f"[[{topology[0].kind}]]" if topology else "[[adapt]]"
         raise SceneError(f"{key}: viscous materials cannot be combined with {what} yet (their history is not "
                          "carried to changed cells)")
+
+
+def _check_mixed(materials, solver, topology, adapt, contact, obstacles) -> None:
+    """formulation = "mixed" (runtime.assembly.mixed): what its saddle-point Newton (runtime.physics.saddle) runs with."""
+    mixed = [i for i, m in enumerate(materials) if getattr(m, "formulation", "") == "mixed"]
+    if not mixed:
+        return
+    key = f"material[{mixed[0]}].formulation"
+    if solver.kind not in ("static", "implicit_euler", "backward_euler"):
+        raise SceneError(f"{key}: \"mixed\" (pressure unknowns) runs with kind = \"static\", \"implicit_euler\" or "
+                         f"\"backward_euler\", not {solver.kind!r} (an explicit or generalized-alpha step has no "
+                         "equation for a massless pressure)")
+    if solver.stiffness_every != 1:
+        raise SceneError(f"{key}: \"mixed\" solves every step exactly: remove solver.stiffness_every "
+                         "(and mode = \"interactive\")")
+    if solver.linear not in ("auto", "direct", "lu"):
+        raise SceneError(f"{key}: \"mixed\" solves its symmetric indefinite (u, p) system with a sparse LU; "
+                         f"solver.linear = {solver.linear!r} does not apply (use \"auto\")")
+    what = (f"[[{topology[0].kind}]]" if topology else "[[adapt]]" if adapt else
+            "contact" if contact is not None or obstacles else None)
+    if what is not None:
+        raise SceneError(f"{key}: \"mixed\" cannot be combined with {what} yet")
+    viscous = [i for i in mixed if materials[i].viscous]
+    if viscous:
+        raise SceneError(f"material[{viscous[0]}].viscous: viscous materials cannot use formulation = \"mixed\" yet")
 
 
 def _check_native(key, law, native, dim):

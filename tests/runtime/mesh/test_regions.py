@@ -201,9 +201,9 @@ def test_scene_validates_E_and_nu_once_through_laws(monkeypatch):
     calls = []
     original = laws_base.validate_E_nu
 
-    def spy(E, nu):
+    def spy(E, nu, *args):
         calls.append((float(E), float(nu)))
-        return original(E, nu)
+        return original(E, nu, *args)
 
     monkeypatch.setattr(laws_base, "validate_E_nu", spy)
     text = ('[mesh]\ngenerate = "bar"\ncells = [2, 1, 1]\n[[material]]\nE = 1e6\nnu = 0.3\n'

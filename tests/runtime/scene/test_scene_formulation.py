@@ -47,7 +47,7 @@ def test_default_and_given_formulations_are_stored():
 @pytest.mark.parametrize("value, message", [
     ('"fbar"', "material[0].formulation: unknown formulation 'fbar'; known: " + ", ".join(FORMULATIONS)),
     ("3", "material[0].formulation: expected a string (one of displacement, mean_dilatation, nodal_pressure, "
-          "edge_smoothed)"),
+          "edge_smoothed, mixed)"),
 ])
 def test_unknown_formulations_are_refused_with_the_known_names(value, message):
     with pytest.raises(SceneError, match="^" + re.escape(message)):
