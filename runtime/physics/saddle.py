@@ -13,9 +13,10 @@ and each Newton step solves the symmetric indefinite system
 with a sparse LU (SuperLU, whose pivoting handles the zero block at nu = 0.5, and the non-symmetric
 stiffness of a follower pressure on an open surface).  L has a saddle
 point, not a minimum, so the energy cannot rank trial steps: the line search halves the step until
-the scaled residual norm |g_f|^2 / f^2 + |r|^2 / V^2 decreases (Newton's direction always descends
-it), or, while boundaries move, until the state is finite.  Converged: |g_f| <= newton_tolerance x
-the force scale and |r| <= newton_tolerance x the volume, or below their round-off after a full step.
+the scaled residual norm |g_f|^2 / f^2 + sum_g (r_g / V_g)^2 decreases (Newton's direction always
+descends it), or, while boundaries move, until the state is finite.  Converged: |g_f| <= newton_tolerance
+x the force scale (or its round-off after a full step) and every group's relative volume residual
+|r_g| / V_g <= newton_tolerance (V_g = integral of N_a at rest).
 
 The pressures live in the couplings (MixedCoupling.pressure).  A solve that fails puts back the
 pressures it started from, so a refused step or a cut time step leaves no trace.
@@ -32,7 +33,7 @@ from .health import safe_norm
 __all__ = ["Pressures", "newton_saddle", "linearised_step"]
 
 _MAX_HALVINGS = 30
-# volume residual below this x the volume is round-off (sums of v_q theta_q over the cells)
+# a relative volume residual below this is round-off (sums of v_q theta_q over the cells)
 _VOLUME_ROUNDOFF = 1e3 * np.finfo(float).eps
 
 
@@ -45,7 +46,7 @@ class Pressures:
         sizes = [c.n_groups for c in self.couplings]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.n = int(self.offsets[-1])
-        self.volume = float(sum(c.V.sum() for c in self.couplings))
+        self.V = np.concatenate([c.V for c in self.couplings]) if self.couplings else np.zeros(0)
         self.C = sp.block_diag([c.C for c in self.couplings], format="csr")
 
     def get(self) -> np.ndarray:
@@ -68,14 +69,20 @@ class Pressures:
         U = self._U(u)
         return sp.vstack([c.constraint_matrix(U, self.model.n_dofs) for c in self.couplings], format="csr")
 
+    def volume_change(self, u) -> float:
+        """max over the couplings of |their volume / their rest volume - 1| (the MINI stabilisation on
+        tetra moves volume between pressure groups but keeps their sum: its rows sum to zero)."""
+        U = self._U(u)
+        return max((abs(float(np.dot(c.volume_ratio(U), c.V) / c.V.sum()) - 1.0) for c in self.couplings), default=0.0)
+
     def volume_error(self, u) -> float:
         """max over the pressure groups of |integral N_a theta dV / integral N_a dV - 1|."""
         U = self._U(u)
         return max((float(np.abs(c.volume_ratio(U) - 1.0).max(initial=0.0)) for c in self.couplings), default=0.0)
 
 
-def _merit(g_free, r, f_scale, v_scale) -> float:
-    return (safe_norm(g_free) / f_scale) ** 2 + (safe_norm(r) / v_scale) ** 2
+def _merit(g_free, r, f_scale, V) -> float:
+    return (safe_norm(g_free) / f_scale) ** 2 + safe_norm(r / V) ** 2
 
 
 def newton_saddle(ctx, potential, u, target_c, where: str):
@@ -96,18 +103,18 @@ def newton_saddle(ctx, potential, u, target_c, where: str):
 
 def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
     force_scale = max(potential.force_scale(u), 1e-30)
-    v_scale = max(P.volume, 1e-300)
+    V = P.V
     g, r = potential.gradient(u), P.residual(u)
     full, floor = False, 0.0
     for it in range(1, s.newton_max_iterations + 1):
         du_c = target_c - u[fixed]
         moving = bool(np.any(du_c))
         f_scale = max(force_scale, safe_norm(g[fixed]))
-        res_u, res_p = safe_norm(g[free]), safe_norm(r)
+        res_u, res_p = safe_norm(g[free]), float(np.abs(r / V).max(initial=0.0))
         if not (np.isfinite(res_u) and np.isfinite(res_p)):
             raise TensormassError(f"{where}: the residual is not finite (|residual| = {res_u:.3g}, volume "
                                   f"residual {res_p:.3g}): elements inverted or loads beyond range")
-        volume_ok = res_p <= s.newton_tolerance * v_scale or res_p <= _VOLUME_ROUNDOFF * v_scale
+        volume_ok = res_p <= max(s.newton_tolerance, _VOLUME_ROUNDOFF)
         if not moving and volume_ok and (res_u <= s.newton_tolerance * f_scale or (full and res_u <= floor)):
             ctx.residual = (u, g)
             return u, it - 1
@@ -115,7 +122,7 @@ def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
         d, dp = _solve(ctx, data, P.constraint_matrix(u), P.C, g, r, du_c, fixed, free)
         floor = ctx.roundoff_floor(data)
         ctx.newton_iterations += 1
-        m0 = _merit(g[free], r, f_scale, v_scale)
+        m0 = _merit(g[free], r, f_scale, V)
         p0, a = P.get(), 1.0
         for _ in range(_MAX_HALVINGS):
             trial = u + a * d
@@ -123,7 +130,7 @@ def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
             try:
                 ctx.check_not_inverted(trial)
                 g_t, r_t = potential.gradient(trial), P.residual(trial)
-                m = _merit(g_t[free], r_t, f_scale, v_scale)
+                m = _merit(g_t[free], r_t, f_scale, V)
             except InvertedElementError:
                 m = np.inf
             if np.isfinite(m) and (moving or m < m0 or (a == 1.0 and m <= (1.0 + 1e-6) * m0)):
@@ -135,7 +142,7 @@ def _iterate(ctx, potential, u, target_c, where, P, fixed, free, s):
                                   f"{res_p:.3e}); the load step is too large or elements invert: use more steps")
         u, g, r, full = trial, g_t, r_t, a == 1.0
     raise TensormassError(f"{where}: Newton did not converge in {s.newton_max_iterations} iterations (residual "
-                          f"{safe_norm(g[free]):.3e}, volume residual {safe_norm(r):.3e} of volume {v_scale:.3e}); "
+                          f"{safe_norm(g[free]):.3e}, largest relative volume residual {np.abs(r / V).max():.3e}); "
                           "use more steps or a larger newton_max_iterations")
 
 
