@@ -268,6 +268,17 @@ def _adapt_rows(adapt) -> list:
     return rows
 
 
+def _incompressible_rows(info) -> list:
+    """The mixed formulation's row (runtime.physics.saddle.Pressures.summary), or none."""
+    if not info:
+        return []
+    change, error = info.get("volume_change"), info.get("group_volume_error")
+    kept = ("volume not evaluated (the last state is not finite)" if change is None else
+            f"volume change {change:.2g} of the body, largest per pressure group {error:.2g}")
+    return [("incompressible", f"{', '.join(info.get('pairs', []))}: {info.get('unknowns')} pressure unknowns, "
+                               f"p from {info.get('pressure_min', 0):.4g} to {info.get('pressure_max', 0):.4g} Pa; {kept}")]
+
+
 def _status_rows(data: dict) -> list:
     """How the run ended, always shown: a result we stand behind, with warnings, or why not."""
     status = data.get("status") or "ok"
@@ -387,6 +398,7 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
                                         "of the largest displacement"))
     if isinstance(data.get("stable_dt"), (int, float)) and math.isfinite(data["stable_dt"]):
         rows.append(("stable step", f"{_fmt_seconds(data['stable_dt'])} estimated at rest (explicit: 2 / omega_max)"))
+    rows += _incompressible_rows(data.get("incompressible"))
     energy = data.get("energy")
     rows.append(("final energy", f"{energy:.6g} J (elastic)" if isinstance(energy, (int, float)) else "n/a"))
     for name, u in (data.get("probes") or {}).items():

@@ -82,6 +82,7 @@ class MixedCoupling:
         part = model.parts[part_index]
         self.part_index, self.formulation, self.law = part_index, "mixed", part.law
         self.element = part.element
+        self.pair = PAIRS[part.element][1]
         self.parameter, self.measure, self.function = volumetric_functions(part.law)
         self.rows = np.asarray(rows, dtype=np.int64)
         self.cells = np.ascontiguousarray(part.cells[self.rows], dtype=np.int64)

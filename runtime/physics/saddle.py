@@ -75,6 +75,15 @@ class Pressures:
         U = self._U(u)
         return max((abs(float(np.dot(c.volume_ratio(U), c.V) / c.V.sum()) - 1.0) for c in self.couplings), default=0.0)
 
+    def summary(self, u) -> dict:
+        """For the run summary: the pairs, the pressure unknowns' range, the volume kept."""
+        p = self.get()
+        finite = bool(np.all(np.isfinite(u)))
+        return {"pairs": sorted({c.pair for c in self.couplings}), "unknowns": self.n,
+                "pressure_min": float(p.min()) if p.size else 0.0, "pressure_max": float(p.max()) if p.size else 0.0,
+                "volume_change": self.volume_change(u) if finite else None,
+                "group_volume_error": self.volume_error(u) if finite else None}
+
     def volume_error(self, u) -> float:
         """max over the pressure groups of |integral N_a theta dV / integral N_a dV - 1|."""
         U = self._U(u)

@@ -88,6 +88,7 @@ class Summary:
     units: dict = field(default_factory=dict)      # unit of every per_step key (runtime.run.history.units)
     advice: list = field(default_factory=list)     # setup-time advice (runtime.scene.advice); never changes status
     contact: dict | None = None           # runtime.contact: method, settings, surface and the run's extremes
+    incompressible: dict | None = None    # formulation "mixed": the pressures' range and the volume kept (runtime.physics.saddle)
 
     @property
     def exit_code(self) -> int:
@@ -661,7 +662,8 @@ class Simulation:
             fields=self._fields_summary(), reactions=self._final_reactions(),
             units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic,
                          getattr(model, "contact", None) is not None), advice=list(getattr(self, "advice", [])),
-            contact=None if getattr(model, "contact", None) is None else model.contact.summary())
+            contact=None if getattr(model, "contact", None) is None else model.contact.summary(),
+            incompressible=None if getattr(ctx, "pressures", None) is None else ctx.pressures.summary(ctx.u))
 
     def _budget(self) -> dict:
         """{"budget": what the budgeted step kept and its estimated trajectory error} (runtime.physics.
