@@ -17,6 +17,15 @@ relative difference from its reference over the times or stretches listed:
   it bend as well as shear, so the difference is the geometry's, as in the thesis (qualitative).
 - hgo along / across: a cube of fibre-reinforced tetrahedra (laws/hgo.py) stretched 25 % along and
   across its fibres against the principal-stretch solution of the same energy (numpy, by hand).
+- incompressible uniaxial ELEMENT: formulation "mixed" at nu = 0.5 (runtime.assembly.mixed), a cube of
+  2 x 2 x 2 cells stretched 50 % with rollers, against neo-Hookean's incompressible P = mu (l - 1/l^2).
+- cook ELEMENT FORMULATION nu NU: Cook's membrane extruded one cell thick, plane strain (u_z = 0),
+  Hooke with E = 1, the vertical shear of cook.py; the corner's deflection against the mixed run at
+  nu = 0.5 on the same mesh (error_analytic: the relative difference from it).  The mixed runs at
+  0.4999 and 0.49999 converge to it; the displacement formulation at 0.4999 shows the locking.
+- organ ELEMENT nu NU: the organ of `bench organ` (gmsh tetra10, h = 8 mm, liver-sized, with P2-P1;
+  without gmsh or with --quick the committed small tetra organ with the stabilised P1-P1), two static
+  load steps of its gravity and traction, against the same at nu = 0.5: the top pole's displacement.
 """
 from __future__ import annotations
 
@@ -36,8 +45,12 @@ H = 0.02                                   # s: the relaxation / creep step
 BRANCHES = ((0.5, 2.0), (0.05, 1.0))       # (tau, beta) of the relaxation case
 SLS = (0.2, 1.5)                            # the creep case's one branch
 HGO = {"E": 3000.0, "nu": 0.45, "k1": 2000.0, "k2": 1.5, "dispersion": 0.1}
-TISSUE_FULL = {"organs": ["liver", "kidney", "spleen"], "b22": True, "steps": 100}
-TISSUE_QUICK = {"organs": ["liver"], "b22": False, "steps": 50}
+TISSUE_FULL = {"organs": ["liver", "kidney", "spleen"], "b22": True, "steps": 100, "cook_cells": 16,
+               "cook_elements": ["hexahedron", "tetra10", "tetra"], "organ": "tetra10"}
+TISSUE_QUICK = {"organs": ["liver"], "b22": False, "steps": 50, "cook_cells": 4, "cook_elements": ["tetra"],
+                "organ": "tetra"}
+NUS = (0.4999, 0.49999, 0.5)               # the mixed runs converging to nu = 0.5
+MIXED_QUADRATURE = {"tetra": "gauss1", "tetra10": "gauss2", "hexahedron": "gauss2"}
 
 
 # -- scenes ------------------------------------------------------------------------------------------
@@ -110,6 +123,57 @@ def _hgo_scene(axis: int) -> dict:
     return data
 
 
+def _uniaxial_incompressible_scene(element: str, stretch: float) -> dict:
+    material = {"quadrature": MIXED_QUADRATURE[element], "nu": 0.5, "formulation": "mixed"}
+    data = _cube(material, {"fixed": [{"name": "pulled", "box": [[-1, -1, 0.99], [2, 2, 1.01]], "components": [2],
+                                       "displacement": [0.0, 0.0, stretch - 1.0]}]}, 3, 1.0, cells=(2, 2, 2))
+    data["mesh"]["element"] = element
+    return data
+
+
+def cook_mesh_3d(element: str, n: int, thickness: float = 1.0):
+    """Cook's panel extruded one cell thick (z in [0, thickness]): hexahedra, Kuhn tetrahedra, or those
+    with straight-sided midside nodes; a meshio mesh."""
+    import meshio
+    from ...runtime.mesh.bars import generate_bar
+    from ...runtime.mesh.container import CellBlock, Mesh
+    from ...runtime.mesh.uniform import to_quadratic
+    from .cook import _map
+    bar = generate_bar((1.0, 1.0, thickness), (n, n, 1), "hexahedron" if element == "hexahedron" else "tetra")
+    x, y = _map(bar.points[:, 0], bar.points[:, 1])
+    mesh = Mesh(np.column_stack([x, y, bar.points[:, 2]]), [CellBlock(b.type, b.cells) for b in bar.blocks])
+    if element == "tetra10":
+        mesh = to_quadratic(mesh)
+    return meshio.Mesh(mesh.points, [(b.type, np.asarray(b.cells)) for b in mesh.blocks])
+
+
+def _cook_scene(path, element: str, nu: float, formulation: str) -> dict:
+    from .cook import COOK_CORNERS, COOK_LOAD, cook_scene
+    data = cook_scene(path, element, nu, MIXED_QUADRATURE[element], formulation)
+    x_load, height = COOK_CORNERS[1][0], COOK_CORNERS[2][1] - COOK_CORNERS[1][1]
+    data["fixed"] = [{"box": [[-1e-9, -1.0, -1.0], [1e-9, 100.0, 2.0]]},
+                     {"box": [[-1.0, -1.0, -1.0], [100.0, 100.0, 2.0]], "components": [2]}]      # plane strain
+    data["loads"] = {"traction": [{"box": [[x_load - 1e-9, -1.0, -1.0], [x_load + 1e-9, 100.0, 2.0]],
+                                   "value": [0.0, COOK_LOAD / height, 0.0]}]}
+    data["probe"] = [{"name": "corner", "point": [*COOK_CORNERS[2], 0.0]}]
+    return data
+
+
+def _organ_scene(element: str, nu: float) -> str:
+    """The organ of `bench organ` with formulation "mixed" (TOML text), its top pole probed."""
+    from .. import bench_organ as bo
+    from .dynamics import QUICK_MESH
+    if element == "tetra":
+        path, quadrature, scale = QUICK_MESH, "gauss1", 1.0
+    else:
+        case = bo.Case("tissue_organ", "organ", "tetra10", "static", 1, size=0.008, scale=bo.ORGAN_SCALE)
+        path, quadrature, scale = bo.organ_mesh(case)[0], "gauss2", bo.ORGAN_SCALE
+    text = bo.organ_text("tissue_organ", path, quadrature, {"kind": "static", "steps": 2})
+    text = text.replace(f"nu = {bo.NU}", f"nu = {nu}").replace(
+        'law = "neohookean"', 'law = "neohookean"\nformulation = "mixed"')
+    return text + f"[[probe]]\nname = \"pole\"\npoint = [0.0, 0.0, {0.030 * scale}]\n"
+
+
 # -- references ----------------------------------------------------------------------------------------
 def relaxation(t, strain=1e-3):
     """Uniaxial stress of the linear Prony model for a strain ramp over the first step, then held."""
@@ -158,9 +222,10 @@ def hgo_stress(stretch: float, axis: int) -> float:
 # -- the benchmark -----------------------------------------------------------------------------------
 def _run(data):
     from ...runtime.scene.scene import Scene
-    summary, peak, sim = measure(Scene.from_dict(data))
+    scene = Scene.from_string(data) if isinstance(data, str) else Scene.from_dict(data)
+    summary, peak, sim = measure(scene)
     if summary.status != "ok":
-        raise RuntimeError(f"tissue: {data['name']} ended {summary.status}: {summary.message}")
+        raise RuntimeError(f"tissue: {scene.name} ended {summary.status}: {summary.message}")
     return summary, peak, sim
 
 
@@ -229,10 +294,58 @@ def tissue(quick, progress, sweep=None) -> dict:
         summary, peak, sim = _run(_hgo_scene(axis))
         force = float(sim.reactions()["pulled"]["force"][axis])
         _add(rows, case, "hgo", "tetra", summary, peak, force, force / hgo_stress(1.25, axis) - 1)
+    _incompressible(cfg, rows, notes, progress)
     for r in rows:
         progress(f"  {r['case']:<28} value {r['value']:.6g}  error {r['error_analytic']:+.3g}")
-    reference = {"subject": "tissue laws: Prony relaxation and creep, LBMC power laws as Prony fits, HGO tension",
-                 "numerical": "none (each case has a closed form)",
+    reference = {"subject": "tissue laws: Prony relaxation and creep, LBMC power laws as Prony fits, HGO tension, "
+                            "exact incompressibility",
+                 "numerical": "the mixed formulation at nu = 0.5 on the same mesh (cook and organ rows)",
                  "analytic": "closed forms of the linear Prony model, the LBMC power law K rate t^(1-n) / Gamma(2-n), "
-                             "HGO's principal-stretch solution"}
+                             "HGO's principal-stretch solution, incompressible neo-Hookean uniaxial tension"}
     return {"rows": rows, "reference": reference, "compile_s": compile_s, "notes": notes}
+
+
+def _incompressible(cfg, rows, notes, progress) -> None:
+    """The mixed formulation's rows: the closed form at nu = 0.5, then Cook's membrane and the organ
+    converging to their nu = 0.5 runs (module docstring)."""
+    import tempfile
+    from pathlib import Path
+    import meshio
+    stretch = 1.5
+    for element in ("tetra", "tetra10", "hexahedron"):
+        summary, peak, sim = _run(_uniaxial_incompressible_scene(element, stretch))
+        force = float(sim.reactions()["pulled"]["force"][2])
+        exact = E / 3 * (stretch - stretch ** -2)
+        _add(rows, f"incompressible uniaxial {element}", "neohookean", element, summary, peak, force, force / exact - 1,
+             cells="2x2x2", quadrature=MIXED_QUADRATURE[element])
+    n = int(cfg["cook_cells"])
+    with tempfile.TemporaryDirectory() as folder:
+        for element in cfg["cook_elements"]:
+            path = Path(folder) / f"cook3d_{element}_{n}.vtu"
+            meshio.write(path, cook_mesh_3d(element, n))
+            runs = [("mixed", nu) for nu in NUS] + [("displacement", NUS[0])]
+            results = {}
+            for formulation, nu in runs:
+                summary, peak, _ = _run(_cook_scene(path, element, nu, formulation))
+                results[(formulation, nu)] = (summary, peak, float(summary.probes["corner"][1]))
+            limit = results[("mixed", 0.5)][2]
+            for (formulation, nu), (summary, peak, value) in results.items():
+                _add(rows, f"cook {element} {formulation} nu {nu:g}", "hooke", element, summary, peak, value,
+                     value / limit - 1, cells=f"{n}x{n}x1", quadrature=MIXED_QUADRATURE[element])
+    element = cfg["organ"]
+    if element == "tetra10":
+        from .. import bench_organ as bo
+        try:
+            bo.require_gmsh()
+        except bo.GmshMissing as why:
+            notes.append(f"- organ at nu = 0.5: {why}; the small committed tetra organ instead")
+            element = "tetra"
+    results = {}
+    for nu in NUS:
+        summary, peak, sim = _run(_organ_scene(element, nu))
+        results[nu] = (summary, peak, float(summary.probes["pole"][2]), sim.ctx.pressures.volume_change(sim.ctx.u))
+    limit = results[0.5][2]
+    for nu, (summary, peak, value, change) in results.items():
+        _add(rows, f"organ {element} nu {nu:g}", "neohookean", element, summary, peak, value, value / limit - 1,
+             cells=str(summary.n_elements), quadrature=MIXED_QUADRATURE[element])
+    notes.append(f"- organ ({element}) at nu = 0.5: volume change {results[0.5][3]:.2g} of the body")

@@ -10,8 +10,10 @@ and each Newton step solves the symmetric indefinite system
     [ K_ff   B_f^T ] [ d_f ]     [ g_f + K_fc d_c ]
     [ B_f    -C    ] [ dp  ] = - [ r   + B_c d_c  ]          d_c: the fixed dofs' remaining move
 
-with a sparse LU (SuperLU, whose pivoting handles the zero block at nu = 0.5, and the non-symmetric
-stiffness of a follower pressure on an open surface).  L has a saddle
+with PARDISO's symmetric indefinite LDL^T (Bunch-Kaufman pivoting handles the zero block at nu = 0.5;
+the mkl wheel, a default dependency on x86-64), else and for the non-symmetric stiffness of a
+follower pressure on an open surface with SuperLU's LU; each solve is refined twice against the
+matrix.  L has a saddle
 point, not a minimum, so the energy cannot rank trial steps: the line search halves the step until
 the scaled residual norm |g_f|^2 / f^2 + sum_g (r_g / V_g)^2 decreases (Newton's direction always
 descends it), or, while boundaries move, until the state is finite.  Converged: |g_f| <= newton_tolerance
@@ -28,11 +30,15 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from ..base.errors import InvertedElementError, TensormassError
+from ..base.parallel import worker_threads
+from ..solve import pardiso
+from ..solve.solvers import PARDISO_PARALLEL_DOFS
 from .health import safe_norm
 
 __all__ = ["Pressures", "newton_saddle", "linearised_step"]
 
 _MAX_HALVINGS = 30
+_REFINEMENTS = 2                # iterative refinement steps of each saddle solve
 # a relative volume residual below this is round-off (sums of v_q theta_q over the cells)
 _VOLUME_ROUNDOFF = 1e3 * np.finfo(float).eps
 
@@ -171,8 +177,9 @@ def linearised_step(ctx, A_data, b, dv_c, u, v, h):
     Af = A[free]
     Bf = B[:, free]
     rhs = np.concatenate([b[free] - Af[:, fixed] @ dv_c, rhs_p])
-    M = sp.bmat([[Af[:, free], h * h * Bf.T], [h * h * Bf, -h * h * P.C]], format="csc")
-    x = _factor_solve(M, rhs)
+    M = sp.bmat([[Af[:, free], h * h * Bf.T], [h * h * Bf, -h * h * P.C]], format="csr")
+    pressure = model.pressure
+    x = _factor_solve(M, rhs, len(free), symmetric=pressure is None or pressure.symmetric)
     dv = np.zeros(model.n_dofs)
     dv[free], dv[fixed] = x[:len(free)], dv_c
     dp = h * x[len(free):]
@@ -180,15 +187,49 @@ def linearised_step(ctx, A_data, b, dv_c, u, v, h):
     return dv, B.T @ dp
 
 
-def _factor_solve(A, rhs):
-    try:
-        x = splu(A).solve(rhs)
-    except RuntimeError as exc:           # SuperLU: "Factor is exactly singular"
-        raise TensormassError(f"the mixed (u, p) system is singular ({exc}): a rigid-body motion left free, or "
-                              "pressure groups with no displacement to constrain") from None
+def _factor_solve(A, rhs, n_u, symmetric=True):
+    """x = A^-1 rhs for A = [[K, B^T], [B, -C]] with n_u displacement rows: PARDISO's symmetric
+    indefinite LDL^T (Bunch-Kaufman pivoting) where the mkl wheel is installed and A is symmetric,
+    else SuperLU; refined in float64 against A.  The pressures are scaled by s = max|K| / max|B|
+    first, so that the two blocks' pivots are of one size (B is a volume, K a stiffness)."""
+    singular = ("the mixed (u, p) system is singular ({}): a rigid-body motion left free, or pressure "
+                "groups with no displacement to constrain")
+    n = A.shape[0]
+    top, coupling = abs(A[:n_u, :n_u]).max(), abs(A[n_u:, :n_u]).max()
+    scale = np.ones(n)
+    if top > 0 and coupling > 0:
+        scale[n_u:] = top / coupling
+    S = sp.diags(scale, format="csr")
+    A = (S @ A @ S).tocsr()
+    rhs = scale * rhs
+    if symmetric and pardiso.available():
+        upper = sp.triu(A, format="coo")
+        # PARDISO needs every diagonal entry stored, zeros too (COO -> CSR keeps a summed zero)
+        upper = sp.coo_matrix((np.concatenate([upper.data, np.zeros(n)]),
+                               (np.concatenate([upper.row, np.arange(n)]), np.concatenate([upper.col, np.arange(n)]))),
+                              shape=(n, n)).tocsr()
+        upper.sort_indices()
+        threads = worker_threads() if A.shape[0] >= PARDISO_PARALLEL_DOFS else 1
+        try:
+            handle = pardiso.Pardiso(A.shape[0], upper.indptr, upper.indices, threads=threads)
+            # saddle points: symmetric weighted matching and scaling (iparm 11, 13), Intel's advice
+            # for a zero block, so that 2 x 2 pivots pair each pressure with displacements
+            handle.iparm[10] = handle.iparm[12] = 1
+            handle.factor(upper.data)
+            solve = handle.solve
+        except pardiso.PardisoError as exc:
+            raise TensormassError(singular.format(exc)) from None
+    else:
+        try:
+            solve = splu(A.tocsc()).solve
+        except RuntimeError as exc:           # SuperLU: "Factor is exactly singular"
+            raise TensormassError(singular.format(exc)) from None
+    x = solve(rhs)
+    for _ in range(_REFINEMENTS):             # perturbed pivots (PARDISO) and round-off: refine against A
+        x = x + solve(rhs - A @ x)
     if not np.all(np.isfinite(x)):
         raise TensormassError("the mixed (u, p) system gave a non-finite step (a singular matrix)")
-    return x
+    return scale * x
 
 
 def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
@@ -197,7 +238,9 @@ def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
     Kf = K[free]
     Bf, Bc = B[:, free], B[:, fixed]
     rhs = -np.concatenate([g[free] + Kf[:, fixed] @ du_c, r + Bc @ du_c])
-    x = _factor_solve(sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csc"), rhs)
+    pressure = ctx.model.pressure
+    x = _factor_solve(sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csr"), rhs, len(free),
+                      symmetric=pressure is None or pressure.symmetric)
     d = np.zeros(ctx.model.n_dofs)
     d[free] = x[:len(free)]
     d[fixed] = du_c
