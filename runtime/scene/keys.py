@@ -146,7 +146,7 @@ KEYS = (
         default_text="gauss2 (discrete laws: discrete; shells: exact)",
         doc="The integration rule; the element x law x quadrature must be in the catalogue."),
     Key("material", "E", "number", unit="Pa", doc="Young's modulus, > 0; with nu, or the law's native parameters."),
-    Key("material", "nu", "number", unit="1", doc="Poisson's ratio, in (-1, 0.5)."),
+    Key("material", "nu", "number", unit="1", doc="Poisson's ratio, in (-1, 0.5); 0.5 (incompressible) with formulation = \"mixed\"."),
     Key("material", "density", "number", 1000.0, "kg/m^3", doc="Mass density, > 0."),
     Key("material", "formulation", "string", "displacement", choices="runtime.physics.formulations:FORMULATIONS",
         doc="How the law's volumetric part is integrated (see Materials and formulations)."),

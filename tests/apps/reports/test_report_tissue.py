@@ -11,13 +11,23 @@ from tensormass.laws import prony
 def test_tissue_report_quick(tmp_path):
     rows = run_accuracy(tmp_path, benchmarks=["tissue"], quick=True, progress=None)
     by = {r["case"]: r for r in rows}
+    mixed = {f"incompressible uniaxial {e}" for e in ("tetra", "tetra10", "hexahedron")} | {
+        f"cook tetra mixed nu {nu:g}" for nu in (0.4999, 0.49999, 0.5)} | {"cook tetra displacement nu 0.4999"} | {
+        f"organ tetra nu {nu:g}" for nu in (0.4999, 0.49999, 0.5)}
     assert set(by) == {"relaxation", "creep", "hgo along", "hgo across"} | {
-        f"lbmc liver rate {r:g}" for r in prony.RATES}
+        f"lbmc liver rate {r:g}" for r in prony.RATES} | mixed
     assert abs(by["relaxation"]["error_analytic"]) < 0.01 and abs(by["creep"]["error_analytic"]) < 0.01
     for rate in prony.RATES:
         assert abs(by[f"lbmc liver rate {rate:g}"]["error_analytic"]) < 0.01
     assert abs(by["hgo along"]["error_analytic"]) < 0.005 and abs(by["hgo across"]["error_analytic"]) < 0.005
     assert by["relaxation"]["value"] > 1.2          # the force has not relaxed to the elastic one yet at 1 s
+    # nu = 0.5: the closed form; Cook and the organ converge tenfold per decade of 0.5 - nu
+    for e in ("tetra", "tetra10", "hexahedron"):
+        assert abs(by[f"incompressible uniaxial {e}"]["error_analytic"]) < 1e-6
+    for body in ("cook tetra mixed", "organ tetra"):
+        far, near = (abs(by[f"{body} nu {nu:g}"]["error_analytic"]) for nu in (0.4999, 0.49999))
+        assert 8 < far / near < 12 and far < 0.01
+    assert by["cook tetra displacement nu 0.4999"]["error_analytic"] < -0.3       # the displacement tetra locks
     assert "## Benchmark `tissue`" in (tmp_path / "report.md").read_text()
 
 
