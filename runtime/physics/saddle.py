@@ -25,6 +25,8 @@ pressures it started from, so a refused step or a cut time step leaves no trace.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
@@ -181,12 +183,23 @@ def linearised_step(ctx, A_data, b, dv_c, u, v, h):
     rhs = np.concatenate([b[free] - Af[:, fixed] @ dv_c, rhs_p])
     M = sp.bmat([[Af[:, free], h * h * Bf.T], [h * h * Bf, -h * h * P.C]], format="csr")
     pressure = model.pressure
-    x = _factor_solve(M, rhs, len(free), symmetric=pressure is None or pressure.symmetric)
+    x = _timed_solve(ctx, M, rhs, len(free), pressure is None or pressure.symmetric)
     dv = np.zeros(model.n_dofs)
     dv[free], dv[fixed] = x[:len(free)], dv_c
     dp = h * x[len(free):]
     P.set(P.get() + dp)
     return dv, B.T @ dp
+
+
+def _timed_solve(ctx, A, rhs, n_u, symmetric):
+    """_factor_solve, counted and timed with the context's linear solves (statistics only)."""
+    start = time.perf_counter()
+    x, method = _factor_solve(A, rhs, n_u, symmetric)
+    linear = ctx.linear
+    linear.time += time.perf_counter() - start
+    linear.counts[method] = linear.counts.get(method, 0) + 1
+    ctx.linear_iterations += 1
+    return x
 
 
 def _factor_solve(A, rhs, n_u, symmetric=True):
@@ -218,7 +231,7 @@ def _factor_solve(A, rhs, n_u, symmetric=True):
             handle.factor(upper.data)
             x = _refined(handle.solve, A, rhs)
             if _accurate(A, x, rhs):
-                return scale * x
+                return scale * x, "pardiso-saddle"
         except pardiso.PardisoError:
             pass                              # SuperLU below says whether the matrix is singular
     try:
@@ -227,7 +240,7 @@ def _factor_solve(A, rhs, n_u, symmetric=True):
         raise TensormassError(singular.format(exc)) from None
     if not (np.all(np.isfinite(x)) and _accurate(A, x, rhs, _LOOSE)):
         raise TensormassError("the mixed (u, p) system gave an inaccurate or non-finite step (a singular matrix)")
-    return scale * x
+    return scale * x, "superlu-saddle"
 
 
 def _refined(solve, A, rhs):
@@ -254,8 +267,8 @@ def _solve(ctx, data, B, C, g, r, du_c, fixed, free):
     Bf, Bc = B[:, free], B[:, fixed]
     rhs = -np.concatenate([g[free] + Kf[:, fixed] @ du_c, r + Bc @ du_c])
     pressure = ctx.model.pressure
-    x = _factor_solve(sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csr"), rhs, len(free),
-                      symmetric=pressure is None or pressure.symmetric)
+    x = _timed_solve(ctx, sp.bmat([[Kf[:, free], Bf.T], [Bf, -C]], format="csr"), rhs, len(free),
+                     pressure is None or pressure.symmetric)
     d = np.zeros(ctx.model.n_dofs)
     d[free] = x[:len(free)]
     d[fixed] = du_c

@@ -267,7 +267,8 @@ def test_a_saddle_solve_pardiso_leaves_inaccurate_goes_to_superlu(monkeypatch):
     calls = []
     accurate = saddle._accurate
     monkeypatch.setattr(saddle, "_accurate", lambda *a: calls.append(len(a)) or (len(calls) > 1 and accurate(*a)))
-    x = saddle._factor_solve(A, rhs, 3)
+    x, method = saddle._factor_solve(A, rhs, 3)
+    assert method == "superlu-saddle"
     assert np.allclose(A @ x, rhs, rtol=0, atol=1e-12)
     assert len(calls) == (2 if saddle.pardiso.available() else 1)
 
