@@ -77,8 +77,9 @@ class Context:
 
     def warm_up_solver(self) -> None:
         """The linear solver's numba loops for this system, loaded before the first step (runs that
-        solve with a stiffness only: an explicit run never calls it)."""
-        self.linear.warm_up(self.system.structure())
+        solve with a stiffness only: an explicit run never calls it; a mixed one solves saddle systems)."""
+        if self.pressures is None:
+            self.linear.warm_up(self.system.structure())
 
     def cell_size(self) -> np.ndarray:
         """Per dof, the largest cell (bounding-box diagonal) at its node: lengths for the residual floor."""

@@ -194,7 +194,7 @@ def linearised_step(ctx, A_data, b, dv_c, u, v, h):
 def _timed_solve(ctx, A, rhs, n_u, symmetric):
     """_factor_solve, counted and timed with the context's linear solves (statistics only)."""
     start = time.perf_counter()
-    x, method = _factor_solve(A, rhs, n_u, symmetric)
+    x, method = _factor_solve(A, rhs, n_u, symmetric, ctx.pressures)
     linear = ctx.linear
     linear.time += time.perf_counter() - start
     linear.counts[method] = linear.counts.get(method, 0) + 1
@@ -202,7 +202,7 @@ def _timed_solve(ctx, A, rhs, n_u, symmetric):
     return x
 
 
-def _factor_solve(A, rhs, n_u, symmetric=True):
+def _factor_solve(A, rhs, n_u, symmetric=True, keeper=None):
     """x = A^-1 rhs for A = [[K, B^T], [B, -C]] with n_u displacement rows: PARDISO's symmetric
     indefinite LDL^T (Bunch-Kaufman pivoting) where the mkl wheel is installed and A is symmetric,
     else SuperLU; refined in float64 against A.  The pressures are scaled by s = max|K| / max|B|
@@ -224,10 +224,8 @@ def _factor_solve(A, rhs, n_u, symmetric=True):
                                (np.concatenate([upper.row, np.arange(n)]), np.concatenate([upper.col, np.arange(n)]))),
                               shape=(n, n)).tocsr()
         upper.sort_indices()
-        threads = worker_threads() if A.shape[0] >= PARDISO_PARALLEL_DOFS else 1
         try:
-            handle = pardiso.Pardiso(A.shape[0], upper.indptr, upper.indices, threads=threads)
-            # (PARDISO's weighted matching, iparm 13, was measured to break Q1-P0 at nu = 0.5: left off)
+            handle = _handle(keeper, upper)
             handle.factor(upper.data)
             x = _refined(handle.solve, A, rhs)
             if _accurate(A, x, rhs):
@@ -241,6 +239,20 @@ def _factor_solve(A, rhs, n_u, symmetric=True):
     if not (np.all(np.isfinite(x)) and _accurate(A, x, rhs, _LOOSE)):
         raise TensormassError("the mixed (u, p) system gave an inaccurate or non-finite step (a singular matrix)")
     return scale * x, "superlu-saddle"
+
+
+def _handle(keeper, upper):
+    """A PARDISO handle for this pattern: the one kept on `keeper` (Pressures) when the pattern is the
+    last one's, so that its analysis (ordering, symbolic factor) serves every Newton step."""
+    kept = getattr(keeper, "_pardiso", None)
+    if kept is not None and np.array_equal(kept.indptr, upper.indptr) and np.array_equal(kept.indices, upper.indices):
+        return kept
+    n = upper.shape[0]
+    # (PARDISO's weighted matching, iparm 13, was measured to break Q1-P0 at nu = 0.5: left off)
+    handle = pardiso.Pardiso(n, upper.indptr, upper.indices, threads=worker_threads() if n >= PARDISO_PARALLEL_DOFS else 1)
+    if keeper is not None:
+        keeper._pardiso = handle
+    return handle
 
 
 def _refined(solve, A, rhs):
