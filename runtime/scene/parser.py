@@ -897,9 +897,6 @@ def _check_mixed(materials, solver, topology, adapt, contact, obstacles) -> None
             "contact" if contact is not None or obstacles else None)
     if what is not None:
         raise SceneError(f"{key}: \"mixed\" cannot be combined with {what} yet")
-    viscous = [i for i in mixed if materials[i].viscous]
-    if viscous:
-        raise SceneError(f"material[{viscous[0]}].viscous: viscous materials cannot use formulation = \"mixed\" yet")
 
 
 def _check_native(key, law, native, dim):

@@ -287,3 +287,19 @@ def test_the_incompressible_press_example_keeps_its_volume(tmp_path, capsys):
     info = summary["incompressible"]
     assert info["volume_change"] < 1e-8 and info["group_volume_error"] < 1e-8
     assert summary["probes"]["side"][0] > 1e-3                 # the free side bulges out
+
+
+def test_an_incompressible_viscous_cube_relaxes_like_the_prony_closed_form():
+    """nu = 0.5 with Prony branches: the volumetric part is a constraint, so uniaxial stress is all
+    deviatoric and relaxes as E (1 + sum beta exp(-t / tau)); normalised by the elastic mixed run."""
+    from test_viscous import BRANCHES, E, NU, PULL, cube_text, relaxation
+    text = lambda viscous: cube_text(viscous, PULL).replace(f"nu = {NU}", 'nu = 0.5\nformulation = "mixed"')
+    runs = []
+    for viscous in (BRANCHES, ()):
+        sim = Simulation(Scene.from_string(text(viscous)))
+        summary = sim.run()
+        assert summary.status == "ok" and sim.ctx.pressures is not None
+        runs.append((np.array(summary.per_step["time"]), np.array(summary.per_step["reactions"]["pulled"]["force"])[:, 0]))
+    (t, F), (_, F_elastic) = runs
+    expected = np.array([relaxation(x) for x in t]) / (E * 1e-3)
+    assert np.abs(F / F_elastic[-1] / expected - 1).max() < 3e-3
