@@ -107,7 +107,9 @@ def removed(model, removal: Removal):
                            D=part.D[keep], volume=part.volume[keep], dofs=part.dofs[keep], density=part.density[keep],
                            active=part.active[keep],
                            rotary=None if part.rotary is None else np.asarray(part.rotary)[keep],
-                           cell_masses=_rows(part.cell_masses, keep), cell_shares=_rows(part.cell_shares, keep)))
+                           cell_masses=_rows(part.cell_masses, keep), cell_shares=_rows(part.cell_shares, keep),
+                           branches=None if part.branches is None else tuple(b[keep] for b in part.branches),
+                           fibres=_rows(part.fibres, keep), origin_rows=np.flatnonzero(keep)))
     _share_dof_tables(model.parts, parts)
     new.parts = parts
     new.groups = []
@@ -141,7 +143,8 @@ def _part(part: Part, **changes) -> Part:
     fields = dict(element=part.element, law=part.law, quadrature=part.quadrature, kernel=part.kernel,
                   cells=part.cells, cell_ids=part.cell_ids, D=part.D, volume=part.volume, dofs=part.dofs,
                   density=part.density, active=part.active.copy(), rotary=part.rotary,
-                  cell_masses=part.cell_masses, cell_shares=part.cell_shares)
+                  cell_masses=part.cell_masses, cell_shares=part.cell_shares, branches=part.branches,
+                  fibres=part.fibres, origin_rows=np.arange(len(part.cells)))
     fields.update(changes)
     return Part(**fields)
 

@@ -74,6 +74,9 @@ class Part:
     # (zero rows for inactive cells), kept so a topology change re-sums nodes locally (runtime.change.cutting)
     cell_masses: np.ndarray | None = None
     cell_shares: np.ndarray | None = None
+    # after a cut or a removal (runtime.change.cutting): the row each cell had in the part before, so
+    # that per-cell state (the viscous history) follows it; None: a part built from the scene
+    origin_rows: np.ndarray | None = None
 
     def __post_init__(self):
         if self.active is None:

@@ -95,6 +95,17 @@ class ViscousHistory:
             S3[..., 2, 2] = record[..., at["P33"]]
         return np.stack([0.5 * (S3[..., a, b] + S3[..., b, a]) for a, b in PAIRS], axis=-1)
 
+    def carry(self, old: "ViscousHistory") -> None:
+        """Take over the accepted state of `old`, the history of the model before a cut or a removal:
+        each cell keeps its points' branches (Part.origin_rows: its row before; a cut changes nodes,
+        not cells, so nothing is interpolated)."""
+        for i, part in self.parts:
+            if part.origin_rows is None or i not in old.Q:
+                raise TensormassError("viscous history: the changed model's parts do not descend from the old ones")
+            self.Q[i] = old.Q[i][part.origin_rows].copy()
+            self.S[i] = old.S[i][part.origin_rows].copy()
+        self._h = None
+
     def viscous_stress(self) -> dict:
         """{part index: sum_i Q_i (n, points, 6)}: the non-equilibrium stress of the accepted state."""
         return {i: self.Q[i].sum(axis=2) for i, _ in self.parts}

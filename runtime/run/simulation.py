@@ -524,6 +524,8 @@ class Simulation:
         ctx.u = interpolate_nodal(old.u.reshape(-1, dim), parents).ravel() if u is None else u
         ctx.v = interpolate_nodal(old.v.reshape(-1, dim), parents).ravel() if v is None else v
         ctx.t = old.t
+        if ctx.history is not None and old.history is not None:      # a cut or removal of viscous parts
+            ctx.history.carry(old.history)
         ctx.newton_iterations, ctx.linear_iterations = old.newton_iterations, old.linear_iterations
         ctx.asm.time, ctx.linear.time = old.asm.time, old.linear.time
         for method, count in old.linear.counts.items():           # the summary counts every solve

@@ -173,6 +173,9 @@ def test_prepare_without_commit_keeps_the_accepted_state():
     (("viscous = [", "viscous = [{tau = 1.0, beta = 1.0, eta = 2.0}, "), r"viscous\[0\]\.eta: unknown key"),
     (('kind = "static"', 'kind = "explicit"'), r"material\[0\]\.viscous: viscous materials run with"),
     (('law = "neohookean"\nquadrature = "gauss1"', 'law = "mss"'), r"material\[0\]\.viscous: law 'mss' has no energy"),
+    (("[solver]", '[[refine]]\nstep = 2\nbox = [[-1, -1, -1], [2, 2, 2]]\n[solver]'),
+     r"material\[0\]\.viscous: viscous materials cannot be combined with \[\[refine\]\] yet \(their history is not "
+     r"carried to new cells; cuts and removals keep it\)"),
 ])
 def test_scene_errors_name_the_key(change, message):
     text = cube_text(BRANCHES, PULL).replace(*change)
@@ -254,3 +257,22 @@ def test_viscous_fibres_take_the_laws_own_parameters():
         assert sim.run().status == "ok"
         return sim.reactions()["pulled"]["force"][0]
     assert force(True) == pytest.approx(force(False), rel=1e-9)
+
+
+@pytest.mark.parametrize("event, share", [
+    ('[[cut]]\nname = "slit"\nstep = 25\nplane = [[0.0, 0.5, 0.0], [0.0, 1.0, 0.0]]\n', 1.0),
+    ('[[remove]]\nname = "half"\nstep = 25\nbox = [[-1.0, 0.5, -1.0], [2.0, 2.0, 2.0]]\n', 0.5)])
+def test_the_history_follows_cuts_and_removals(event, share):
+    """A cube relaxing in uniaxial stress, cut along the pull (the state stays homogeneous) or with
+    half its cells removed mid-run: the force goes on relaxing as the untouched cube's, times the
+    share of the section left; a history reset at the change would jump to the instantaneous modulus."""
+    force = lambda rows: np.array(rows["reactions"]["pulled"]["force"])[:, 0]
+    text = cube_text(BRANCHES, PULL).replace("cells = [1, 1, 1]", "cells = [2, 2, 2]")
+    assert "cells = [2, 2, 2]" in text
+    t, F = history(Scene.from_string(text), force)
+    t_changed, F_changed = history(Scene.from_string(text + event), force)
+    assert np.array_equal(t, t_changed)
+    after = t > 0.5 - 1e-9                    # the row of the change's step is written after it
+    assert after.any() and (~after).any()
+    assert np.allclose(F_changed[after], share * F[after], rtol=1e-6)
+    assert np.allclose(F_changed[~after], F[~after], rtol=1e-12)
