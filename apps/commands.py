@@ -399,6 +399,9 @@ def print_summary(data: dict, stream=None, json_path=None) -> None:
     if isinstance(data.get("stable_dt"), (int, float)) and math.isfinite(data["stable_dt"]):
         rows.append(("stable step", f"{_fmt_seconds(data['stable_dt'])} estimated at rest (explicit: 2 / omega_max)"))
     rows += _incompressible_rows(data.get("incompressible"))
+    viscous = data.get("viscous")
+    if isinstance(viscous, dict) and isinstance(viscous.get("dissipated"), (int, float)):
+        rows.append(("viscous", f"{viscous['dissipated']:.6g} J dissipated by the Prony branches since the start"))
     energy = data.get("energy")
     rows.append(("final energy", f"{energy:.6g} J (elastic)" if isinstance(energy, (int, float)) else "n/a"))
     for name, u in (data.get("probes") or {}).items():

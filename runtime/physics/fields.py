@@ -79,6 +79,8 @@ FIELDS = {f.name: f for f in (
           other="point", single=True),
     Field("fibre_stretch", "stretch |F a| of the cell's fibre direction a (laws with fibres: hgo; 0 elsewhere)",
           "1", "scalar", _CELL, other="point"),
+    Field("viscous_dissipation", "energy the Prony branches dissipated since the start, per unit rest volume "
+          "(runtime.physics.viscous; 0 in elastic cells)", "J/m^3", "scalar", _CELL, records=False),
     Field("det_F_min", "smallest det F (volume ratio J) over the cell's integration points", "1", "scalar",
           _CELL, single=True),
     Field("energy_density", "strain energy density W per unit rest volume", "J/m^3", "scalar", _CELL,
@@ -111,7 +113,8 @@ CHUNK = 1024
 
 # Fields another module computes: name -> what provides it.
 PROVIDED = {"reaction": "runtime.physics.reactions", "contact_force": "runtime.contact ([contact] or [[obstacle]])",
-            "contact_pressure": "runtime.contact ([contact] or [[obstacle]])"}
+            "contact_pressure": "runtime.contact ([contact] or [[obstacle]])",
+            "viscous_dissipation": "runtime.physics.viscous (a [[material]] with viscous branches)"}
 
 
 def split_name(entry: str) -> tuple:
@@ -325,7 +328,7 @@ class FieldEvaluator:
                 continue
             if n in PROVIDED:
                 check_available(model, (n,), providers)
-                point[n] = np.asarray(providers[n]())
+                (cell if FIELDS[n].where == _CELL else point)[n] = np.asarray(providers[n]())
             else:
                 cell[n] = self._ids_of(n)
         return point, cell

@@ -89,6 +89,7 @@ class Summary:
     advice: list = field(default_factory=list)     # setup-time advice (runtime.scene.advice); never changes status
     contact: dict | None = None           # runtime.contact: method, settings, surface and the run's extremes
     incompressible: dict | None = None    # formulation "mixed": the pressures' range and the volume kept (runtime.physics.saddle)
+    viscous: dict | None = None           # Prony branches: the energy they dissipated (runtime.physics.viscous)
 
     @property
     def exit_code(self) -> int:
@@ -248,11 +249,14 @@ class Simulation:
         return self._evaluator.evaluate(self.dofs.ravel(), names, self._field_providers())
 
     def _field_providers(self) -> dict:
-        """Fields other modules compute: name -> callable() giving the nodal array at the current state."""
+        """Fields other modules compute: name -> callable() giving the array (nodal, or per cell for a
+        cell field) at the current state."""
         providers = {"reaction": lambda: _reactions.reaction_field(self)}      # runtime.physics.reactions
         if self.model.contact is not None:                                     # runtime.contact
             providers["contact_force"] = lambda: self.model.contact.nodal_forces(self.ctx.u)
             providers["contact_pressure"] = lambda: self.model.contact.nodal_pressure(self.ctx.u)
+        if any(p.branches is not None for p in self.model.parts):              # runtime.physics.viscous
+            providers["viscous_dissipation"] = lambda: self.ctx.history.dissipation_field(self.model.mesh.n_cells)
         return providers
 
     def _frame_fields(self) -> tuple:
@@ -665,7 +669,8 @@ class Simulation:
             units=_units(model.dim, not integrator_kinds.get(model.solver.kind).dynamic,
                          getattr(model, "contact", None) is not None), advice=list(getattr(self, "advice", [])),
             contact=None if getattr(model, "contact", None) is None else model.contact.summary(),
-            incompressible=None if getattr(ctx, "pressures", None) is None else ctx.pressures.summary(ctx.u))
+            incompressible=None if getattr(ctx, "pressures", None) is None else ctx.pressures.summary(ctx.u),
+            viscous=None if getattr(ctx, "history", None) is None else {"dissipated": ctx.history.dissipated_energy()})
 
     def _budget(self) -> dict:
         """{"budget": what the budgeted step kept and its estimated trajectory error} (runtime.physics.
