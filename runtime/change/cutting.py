@@ -36,6 +36,7 @@ from ..assembly import loads as _loads
 from ..base.dofs import node_dofs
 from ..assembly.mass import MassMatrix
 from ..assembly.pressure import FollowerPressure
+from ..base.errors import TensormassError
 from ..model.model import LawGroup, Part
 from ..physics.motion import Motion
 from ..mesh.probes import PointProbe
@@ -147,6 +148,21 @@ def _part(part: Part, **changes) -> Part:
                   fibres=part.fibres, origin_rows=np.arange(len(part.cells)))
     fields.update(changes)
     return Part(**fields)
+
+
+def descend(model, new, cell_parent) -> None:
+    """Each part of `new` (a refined model, built anew) learns where its cells come from in the part
+    of `model` at the same index: Part.origin_rows and origin_split (cell_parent: the old id of
+    every new cell's parent, itself when not split)."""
+    split_count = np.bincount(cell_parent, minlength=model.mesh.n_cells)
+    for old, part in zip(model.parts, new.parts):
+        if old.key != part.key:
+            raise TensormassError(f"a refined model's parts differ from the model's ({old.key} / {part.key})")
+        row_of = np.full(model.mesh.n_cells, -1, dtype=np.int64)
+        row_of[old.cell_ids] = np.arange(len(old.cell_ids))
+        parents = cell_parent[part.cell_ids]
+        part.origin_rows = row_of[parents]
+        part.origin_split = split_count[parents] > 1
 
 
 def _rows(array, keep):

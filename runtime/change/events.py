@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cutting import check_model, removed, separated
+from .cutting import check_model, descend, removed, separated
 from .adapt import mean_deformation_gradients
 from ..assembly.pattern import SparsePattern
 from ..base import integrator_kinds
@@ -244,6 +244,7 @@ class TopologyEvents:
             # anew on the refined mesh (check_mesh would refuse its hanging nodes: runtime.physics.hanging)
             new = model.rebuilt(refinement.mesh, check=False)
             check_topology(new.mesh)
+            descend(model, new, refinement.cell_parent)
             u = refinement.interpolate(u.reshape(-1, dpn), model.n_points).ravel()
             v = refinement.interpolate(v.reshape(-1, dpn), model.n_points).ravel()
             counts = {"cells_refined": int(refinement.refined.size), "nodes_added": len(refinement.parents),

@@ -659,6 +659,7 @@ class HexRefinement:
     parents: list                # per new node, its parent nodes (2, 4 or 8): its value is their mean
     refined: np.ndarray          # global ids (before) of the split hexahedra
     new_ids: np.ndarray          # (n_cells before,) id of each old cell afterwards (the first child for split ones)
+    cell_parent: np.ndarray | None = None   # (n_cells after,) the old id of each cell's parent (itself if not split)
 
     def interpolate(self, values: np.ndarray, n_old: int) -> np.ndarray:
         """Nodal values (n_old, ...) extended to the new nodes (the mean of their parents: exact for the
@@ -718,10 +719,13 @@ def refine_hexahedra(mesh: Mesh, cell_ids) -> HexRefinement:
             lattice[i, j, k] = corners[parents[0]] if len(parents) == 1 else node_for(tuple(corners[list(parents)]))
         kids = [[lattice[tuple(c + d)] for d in _CORNER // 2] for c in _CHILD]
         children.setdefault(b, []).append((r, np.array(kids, dtype=np.int64)))
-    blocks, new_ids = [], []
+    blocks, new_ids, parent = [], [], []
+    old_start = np.concatenate([[0], np.cumsum([len(blk) for blk in mesh.blocks])])
     for b, blk in enumerate(mesh.blocks):
         cells = blk.cells
+        parent.append(old_start[b] + np.arange(len(blk)))
         if b in children:
+            parent += [np.full(7, old_start[b] + r) for r, _ in children[b]]
             cells = cells.copy()
             extra = []
             for r, kids in children[b]:
@@ -735,4 +739,4 @@ def refine_hexahedra(mesh: Mesh, cell_ids) -> HexRefinement:
             blocks.append(blk)
         new_ids.append(sum(len(x) for x in blocks[:-1]) + np.arange(len(blk)))
     refined_mesh = Mesh(np.vstack(points), blocks, [], np.vstack(midpoints) if midpoints else None)
-    return HexRefinement(refined_mesh, parents_of_new, ids, np.concatenate(new_ids))
+    return HexRefinement(refined_mesh, parents_of_new, ids, np.concatenate(new_ids), np.concatenate(parent))

@@ -74,9 +74,11 @@ class Part:
     # (zero rows for inactive cells), kept so a topology change re-sums nodes locally (runtime.change.cutting)
     cell_masses: np.ndarray | None = None
     cell_shares: np.ndarray | None = None
-    # after a cut or a removal (runtime.change.cutting): the row each cell had in the part before, so
-    # that per-cell state (the viscous history) follows it; None: a part built from the scene
+    # after a cut, a removal or a refinement (runtime.change): the row each cell had (or its parent
+    # had: origin_split) in the part before, so that per-cell state (the viscous history) follows it;
+    # None: a part built from the scene
     origin_rows: np.ndarray | None = None
+    origin_split: np.ndarray | None = None     # (n,) bool: the cell is a child of a split cell
 
     def __post_init__(self):
         if self.active is None:

@@ -129,17 +129,35 @@ class ViscousHistory:
 
 
     def carry(self, old: "ViscousHistory") -> None:
-        """Take over the accepted state of `old`, the history of the model before a cut or a removal:
-        each cell keeps its points' branches (Part.origin_rows: its row before; a cut changes nodes,
-        not cells, so nothing is interpolated)."""
+        """Take over the accepted state of `old`, the history of the model before a cut, a removal or
+        a refinement (Part.origin_rows: each cell's row before, the same part index).  A cut changes
+        nodes, not cells: each cell keeps its points' state.  The children of a split hexahedron
+        (Part.origin_split) each take their parent's mean over its points at every point: copied,
+        not interpolated."""
         for i, part in self.parts:
-            if part.origin_rows is None or i not in old.Q:
+            if part.origin_rows is None or i not in old.Q or np.any(part.origin_rows < 0):
                 raise TensormassError("viscous history: the changed model's parts do not descend from the old ones")
-            rows = part.origin_rows
+            rows, split = part.origin_rows, part.origin_split
             for mine, theirs in ((self.Q, old.Q), (self.S, old.S), (self.E, old.E),
                                  (self.dissipated, old.dissipated)):
                 mine[i] = theirs[i][rows].copy()
-        self._h = None
+                if split is not None and split.any():
+                    mine[i][split] = mine[i][split].mean(axis=1, keepdims=True)
+            # the point inputs (g, H) of the step that led to the state: its reactions and energy use them
+            old_part = dict(old.parts)[i]
+            columns = np.concatenate([self._columns(part)[0], self._columns(part)[1]])
+            old_columns = np.concatenate([self._columns(old_part)[0], self._columns(old_part)[1]])
+            inputs = old_part.D[rows][:, old_columns]
+            if split is not None and split.any():
+                k = part.kernel.n_points
+                per_point = inputs.reshape(len(rows), -1)
+                g = per_point[:, :k].copy()
+                H = per_point[:, k:].reshape(len(rows), k, 6)
+                g[split] = g[split].mean(axis=1, keepdims=True)
+                H[split] = H[split].mean(axis=1, keepdims=True)
+                inputs = np.concatenate([g, H.reshape(len(rows), -1)], axis=1)
+            part.D[:, columns] = inputs
+        self._h = old._h
 
     def viscous_stress(self) -> dict:
         """{part index: sum_i Q_i (n, points, 6)}: the non-equilibrium stress of the accepted state."""

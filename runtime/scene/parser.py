@@ -871,11 +871,9 @@ def _check_viscous(materials, solver, topology, adapt) -> None:
     if solver.kind in ("explicit", "generalized_alpha"):
         raise SceneError(f"{key}: viscous materials run with kind = \"static\" (each load step lasting "
                          f"solver.dt), \"implicit_euler\" or \"backward_euler\", not {solver.kind!r}")
-    refine = [e for e in topology if e.kind == "refine"]
-    if refine or adapt:
-        what = "[[refine]]" if refine else "[[adapt]]"
-        raise SceneError(f"{key}: viscous materials cannot be combined with {what} yet (their history is not "
-                         "carried to new cells; cuts and removals keep it)")
+    if adapt:
+        raise SceneError(f"{key}: viscous materials cannot be combined with [[adapt]] yet (their history is not "
+                         "carried through its refinement or law switches; [[cut]], [[remove]] and [[refine]] keep it)")
 
 
 def _check_mixed(materials, solver, topology, adapt, contact, obstacles) -> None:
