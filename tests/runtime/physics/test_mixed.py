@@ -239,6 +239,7 @@ def test_scene_errors(change, message):
         Scene.from_string(text)
 
 
+@pytest.mark.heavy           # compiles two numba kernel modules cold: CI's heavy step runs it
 def test_c_and_numba_give_the_same_saddle_system():
     systems = []
     for backend in ("c", "numba"):
