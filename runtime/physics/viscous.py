@@ -104,7 +104,9 @@ class ViscousHistory:
         beta = part.branches[1]                                              # (n, branches)
         m0, m1, de = _mandel(Q0), _mandel(Q1), _mandel(dE)
         taken = 0.5 * np.einsum("nqbk,nqk->nq", m0 + m1, de)
-        stored = lambda m: 0.5 * np.einsum("nqbk,nkl,nqbl->nqb", m, c, m) / beta[:, None, :]
+        # a branch with beta = 0 has no spring: its Q stays 0 and it stores nothing
+        inverse = np.divide(1.0, beta, out=np.zeros_like(beta, dtype=float), where=beta > 0)[:, None, :]
+        stored = lambda m: 0.5 * np.einsum("nqbk,nkl,nqbl->nqb", m, c, m) * inverse
         return taken - (stored(m1) - stored(m0)).sum(axis=2)
 
     def dissipation_field(self, n_cells: int) -> np.ndarray:
