@@ -185,15 +185,17 @@ def organ_mesh(case: Case, folder: Path | None = None) -> tuple[Path, float]:
 
 
 # -- scenes -----------------------------------------------------------------------------------
-def organ_scene_text(case: Case, mesh_file: Path) -> str:
+def organ_scene_text(case: Case, mesh_file: Path, nu: float = NU, formulation: str = "displacement") -> str:
     quadrature = "gauss2" if case.element == "tetra10" else "gauss1"
     solver = {"kind": case.kind, "steps": case.steps, "dt": DT, "newton_tolerance": NEWTON_TOLERANCE, **dict(case.solver)}
-    return organ_text(case.name, mesh_file, quadrature, solver)
+    return organ_text(case.name, mesh_file, quadrature, solver, nu, formulation)
 
 
-def organ_text(name: str, mesh_file, quadrature: str, solver: dict) -> str:
+def organ_text(name: str, mesh_file, quadrature: str, solver: dict, nu: float = NU,
+               formulation: str = "displacement") -> str:
     """The organ scene (the material, clamp and loads of examples/organ/scene.toml) on a mesh file of
-    the organ, with these [solver] keys (also the scene of `report accuracy --benchmark dynamics`)."""
+    the organ, with these [solver] keys (also the scene of `report accuracy --benchmark dynamics`);
+    nu and formulation: the material's (the incompressible and tissue reports change them)."""
     return f"""
 name = "{name}"
 [mesh]
@@ -202,8 +204,8 @@ file = {json.dumps(str(mesh_file))}
 region = "organ"
 law = "neohookean"
 quadrature = "{quadrature}"
-E = {E}
-nu = {NU}
+{"" if formulation == "displacement" else f'formulation = "{formulation}"{chr(10)}'}E = {E}
+nu = {nu}
 density = {DENSITY}
 [[fixed]]
 region = "attached"

@@ -38,9 +38,7 @@ def _organ_text(size, scale, nu, formulation):
     from .. import bench_organ as bo
     case = bo.Case("incompressible", "organ", "tetra10", "static", 1, size=size, scale=scale)
     path, _ = bo.organ_mesh(case)
-    text = bo.organ_scene_text(case, path)
-    text = text.replace(f"nu = {bo.NU}", f"nu = {nu}").replace(
-        'law = "neohookean"', f'law = "neohookean"\nformulation = "{formulation}"')
+    text = bo.organ_scene_text(case, path, nu, formulation)
     return text.replace("[solver]", "[solver]\nnewton_max_iterations = 60"), bo.probe_point(case)
 
 

@@ -163,15 +163,12 @@ def _organ_scene(element: str, nu: float) -> str:
     """The organ of `bench organ` with formulation "mixed" (TOML text), its top pole probed."""
     from .. import bench_organ as bo
     from .dynamics import QUICK_MESH
-    if element == "tetra":
-        path, quadrature, scale = QUICK_MESH, "gauss1", 1.0
-    else:
-        case = bo.Case("tissue_organ", "organ", "tetra10", "static", 1, size=0.008, scale=bo.ORGAN_SCALE)
-        path, quadrature, scale = bo.organ_mesh(case)[0], "gauss2", bo.ORGAN_SCALE
-    text = bo.organ_text("tissue_organ", path, quadrature, {"kind": "static", "steps": 2})
-    text = text.replace(f"nu = {bo.NU}", f"nu = {nu}").replace(
-        'law = "neohookean"', 'law = "neohookean"\nformulation = "mixed"')
-    return text + f"[[probe]]\nname = \"pole\"\npoint = [0.0, 0.0, {0.030 * scale}]\n"
+    # the committed small organ is the same shape at scale 1 (apps/reports/dynamics.py)
+    case = bo.Case("tissue_organ", "organ", element, "static", 2, size=0.008,
+                   scale=1.0 if element == "tetra" else bo.ORGAN_SCALE)
+    path = QUICK_MESH if element == "tetra" else bo.organ_mesh(case)[0]
+    text = bo.organ_scene_text(case, path, nu, "mixed")
+    return text + f"[[probe]]\nname = \"pole\"\npoint = {list(bo.probe_point(case))}\n"
 
 
 # -- references ----------------------------------------------------------------------------------------

@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from ..base.errors import TensormassError
 from ..kernels import kernels as _kernels
 from .assembly import project_psd, scatter_matrix, scatter_vector
-from .volumetric import volumetric_functions
+from .volumetric import VolumetricCoupling, volumetric_functions
 
 __all__ = ["MixedCoupling", "PAIRS", "MINI_TAU"]
 
@@ -204,13 +204,10 @@ class MixedCoupling:
 
     def cell_terms(self, U) -> tuple:
         """(p_e, u_e) per cell for the output fields: the cell's mean pressure (its stress adds p_e
-        dtheta/dF at every point) and its volumetric energy density p_e (theta_e - 1) - p_e^2 / (2 kappa)
-        in the mean."""
+        dtheta/dF at every point) and the Lagrangian's volumetric density p_e (theta_e - 1) in the
+        mean (without the -p^2 / (2 kappa) of nu < 0.5)."""
         p_cell = (self.pressure[self.group_of] * self.shares).sum(axis=1) / self.cell_volume
         theta = self.kernel.energy(self.D, np.ascontiguousarray(U[self.cells])) / self.cell_volume
         return p_cell, p_cell * (theta - 1.0)
 
-    def part_rows(self, n_part_cells: int) -> np.ndarray:
-        index = np.full(n_part_cells, -1, dtype=np.int64)
-        index[self.rows] = np.arange(len(self.rows))
-        return index
+    part_rows = VolumetricCoupling.part_rows

@@ -87,12 +87,16 @@ class ViscousHistory:
 
     # -- pieces -----------------------------------------------------------------------------------
     @staticmethod
-    def _columns(part):
-        """(the D columns of g at every point, of H's 6 components at every point (point-major))."""
+    def _inputs(part) -> np.ndarray:
+        """(points, 7) the D columns of each point's inputs: g, then H's 6 components."""
         k = part.kernel
-        start = k.point_fields["inputs"]
-        points = np.arange(k.n_points) * k.point_stride + start
-        return points, (points[:, None] + 1 + np.arange(6)).ravel()
+        return np.arange(k.n_points)[:, None] * k.point_stride + k.point_fields["inputs"] + np.arange(7)
+
+    @classmethod
+    def _columns(cls, part):
+        """(the D columns of g at every point, of H's 6 components at every point (point-major))."""
+        columns = cls._inputs(part)
+        return columns[:, 0], columns[:, 1:].ravel()
 
     # -- dissipation ------------------------------------------------------------------------------
     def _dissipation(self, i, part, Q0, Q1, dE):
@@ -129,7 +133,6 @@ class ViscousHistory:
         k = part.kernel
         return _stress(k, part.D, u[part.dofs].reshape(len(part.cells), k.n_nodes, k.dofs_per_node), strain)
 
-
     def carry(self, old: "ViscousHistory") -> None:
         """Take over the accepted state of `old`, the history of the model before a cut, a removal or
         a refinement (Part.origin_rows: each cell's row before, the same part index).  A cut changes
@@ -146,18 +149,10 @@ class ViscousHistory:
                 if split is not None and split.any():
                     mine[i][split] = mine[i][split].mean(axis=1, keepdims=True)
             # the point inputs (g, H) of the step that led to the state: its reactions and energy use them
-            old_part = dict(old.parts)[i]
-            columns = np.concatenate([self._columns(part)[0], self._columns(part)[1]])
-            old_columns = np.concatenate([self._columns(old_part)[0], self._columns(old_part)[1]])
-            inputs = old_part.D[rows][:, old_columns]
+            columns = self._inputs(part)                                    # (points, 7)
+            inputs = dict(old.parts)[i].D[rows][:, self._inputs(dict(old.parts)[i])]   # (n, points, 7)
             if split is not None and split.any():
-                k = part.kernel.n_points
-                per_point = inputs.reshape(len(rows), -1)
-                g = per_point[:, :k].copy()
-                H = per_point[:, k:].reshape(len(rows), k, 6)
-                g[split] = g[split].mean(axis=1, keepdims=True)
-                H[split] = H[split].mean(axis=1, keepdims=True)
-                inputs = np.concatenate([g, H.reshape(len(rows), -1)], axis=1)
+                inputs[split] = inputs[split].mean(axis=1, keepdims=True)
             part.D[:, columns] = inputs
         self._h = old._h
 

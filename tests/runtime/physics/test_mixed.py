@@ -108,6 +108,10 @@ def test_the_mini_stabilisation_is_the_condensed_bubble():
     int_b, int_grad2 = V * b.mean(), V * (grad_b ** 2).sum(axis=1).mean()
     tau = int_b ** 2 / (V * int_grad2)                                  # mu = 1
     assert tau * (grads ** 2).sum() == pytest.approx(MINI_TAU, rel=2e-3)
+    # and the pressure block the model assembles on that tetrahedron (E = 3, nu = 0.5: mu = 1)
+    model = Model(Mesh(X, [CellBlock("tetra", np.array([[0, 1, 2, 3]]))]),
+                  [Material(law="neohookean", quadrature="gauss1", E=3.0, nu=0.5, formulation="mixed")])
+    assert np.allclose(model.couplings[0].C.toarray(), tau * V * grads @ grads.T, rtol=3e-3, atol=0)
 
 
 UNIAXIAL = """
