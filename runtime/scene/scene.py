@@ -1,7 +1,8 @@
 """Scenes: what to simulate, as plain data (parsed from TOML by `Scene.from_toml`).
 
 A scene file is data only: nothing in it is evaluated as code. Every key is
-validated; unknown keys, unknown laws or elements, nu >= 0.5, E <= 0 and the
+validated; unknown keys, unknown laws or elements, nu >= 0.5 (0.5 only with formulation
+"mixed"), E <= 0 and the
 like raise SceneError naming the key (arrays of tables are indexed from 0:
 ``material[1]`` is the second ``[[material]]``).
 
