@@ -31,8 +31,6 @@ what the energy, the forces and the stress of this cell group use between solves
 """
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -50,16 +48,27 @@ PAIRS = {"tetra10": ("P1", "P2-P1 (Taylor-Hood)"), "tetra": ("P1", "P1-P1 with M
 MINI_TAU = 3.0 / 140.0
 
 
-@lru_cache(maxsize=None)
-def pressure_shapes(element: str, quadrature: str) -> np.ndarray:
-    """(n_pressure_shapes, n_points) values of the pressure shape functions at the rule's points."""
-    space = PAIRS[element][0]
-    from ...generator import quadrature as rules        # deferred: sympy, only for mixed scenes
-    points = np.array([[float(c) for c in p] for p in rules.rule(element, quadrature).points])
-    if space == "P0":
-        return np.ones((1, len(points)))
-    # barycentric coordinates of the reference tetrahedron (0,0,0), (1,0,0), (0,1,0), (0,0,1)
-    return np.vstack([1.0 - points.sum(axis=1), points.T])
+# gradients of the barycentric coordinates on the reference tetrahedron (0,0,0), (1,0,0), (0,1,0), (0,0,1)
+_GRAD_L = np.array([[-1.0, -1.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def pressure_shapes(kernel) -> np.ndarray:
+    """(n_pressure_shapes, n_points) values of the pressure shape functions at the points of the
+    measure kernel's rule, read from the kernel itself (no quadrature tables, no sympy):
+    - hexahedron (P0): 1;
+    - tetra (P1 on a linear cell): 1/4 at every point. theta is constant in the cell, so every
+      integral of N_a theta is theta V / 4 whatever the points;
+    - tetra10: on the reference cell a corner's shape gradient is (4 l_a - 1) grad l_a, which
+      gives l_a at each point exactly."""
+    q = kernel.n_points
+    if PAIRS[kernel.element][0] == "P0":
+        return np.ones((1, q))
+    if kernel.element == "tetra":
+        return np.full((4, q), 0.25)
+    from ... import elements
+    X = np.array(elements.get(kernel.element).nodes, dtype=float)[None]
+    G = kernel.point_gradients(kernel.constants(X))[0, :, :4]          # (q, 4 corners, 3)
+    return ((np.einsum("qai,ai->qa", G, _GRAD_L) / (_GRAD_L ** 2).sum(axis=1) + 1.0) / 4.0).T
 
 
 def shear_modulus(params: dict, n: int) -> np.ndarray:
@@ -92,7 +101,7 @@ class MixedCoupling:
         if k.v_offset is None or k.G_offset is None:
             raise TensormassError(f"formulation 'mixed' on {part.element}: the measure kernel keeps no point weights")
         self.D = k.constants(model.mesh.points[self.cells])
-        self.N = pressure_shapes(part.element, part.quadrature)              # (a, q)
+        self.N = pressure_shapes(k)                                          # (a, q)
         v = k.point_volumes(self.D)                                          # (n, q)
         self.cell_volume = v.sum(axis=1)
         n = len(self.cells)

@@ -311,3 +311,15 @@ def test_an_incompressible_viscous_cube_relaxes_like_the_prony_closed_form():
     (t, F), (_, F_elastic) = runs
     expected = np.array([relaxation(x) for x in t]) / (E * 1e-3)
     assert np.abs(F / F_elastic[-1] / expected - 1).max() < 3e-3
+
+
+@pytest.mark.parametrize("quadrature", ["gauss2"] + [pytest.param(q, marks=pytest.mark.heavy) for q in ("gauss1", "gauss3")])
+def test_the_pressure_shapes_at_the_points_are_the_rules_barycentric_coordinates(quadrature):
+    """tetra10: read from the kernel's shape gradients, they equal the rule's (generator.quadrature)."""
+    from tensormass.generator.quadrature import rule
+    from tensormass.runtime.assembly.mixed import pressure_shapes
+    from tensormass.runtime.kernels.kernels import load_kernel
+    points = np.array([[float(c) for c in p] for p in rule("tetra10", quadrature).points])
+    expected = np.vstack([1.0 - points.sum(axis=1), points.T])
+    assert np.allclose(pressure_shapes(load_kernel("tetra10", "measure_volume", quadrature)), expected,
+                       rtol=0, atol=1e-14)
