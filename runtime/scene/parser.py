@@ -889,9 +889,10 @@ def _check_mixed(materials, solver, topology, adapt, contact, obstacles) -> None
     if solver.stiffness_every != 1:
         raise SceneError(f"{key}: \"mixed\" solves every step exactly: remove solver.stiffness_every "
                          "(and mode = \"interactive\")")
-    if solver.linear not in ("auto", "direct", "lu"):
-        raise SceneError(f"{key}: \"mixed\" solves its symmetric indefinite (u, p) system with a sparse LU; "
-                         f"solver.linear = {solver.linear!r} does not apply (use \"auto\")")
+    if solver.linear not in ("auto", "direct", "lu", "pardiso"):
+        raise SceneError(f"{key}: \"mixed\" solves its symmetric indefinite (u, p) system with a sparse direct "
+                         f"factorisation (PARDISO's LDL^T, else SuperLU); solver.linear = {solver.linear!r} does not "
+                         "apply (use \"auto\")")
     what = (f"[[{topology[0].kind}]]" if topology else "[[adapt]]" if adapt else
             "contact" if contact is not None or obstacles else None)
     if what is not None:
