@@ -137,6 +137,9 @@ def backend_note(backend: str) -> str:
     if backend == "c":
         return ("kernels: C backend (compiled by the C compiler, about 1 s per kernel the first time, then "
                 "taken from the user cache; [solver] backend = \"numba\" for numba)")
+    if backend == "cuda":
+        return ("kernels: cuda backend (compiled by NVRTC, about 1 s per kernel the first time, then taken from "
+                "the user cache; arrays cross to the GPU and back at every call)")
     why = ("no C compiler was found; with gcc, the default C backend compiles a kernel in about 1 s"
            if default_backend() == "numba" else "[solver] backend = \"numba\"; the C backend compiles in about 1 s")
     return f"kernels: numba backend (6 to 40 s per kernel the first time, then cached; {why})"

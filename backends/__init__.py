@@ -22,11 +22,12 @@ from .protocol import KERNEL_FUNCTIONS, METADATA_KEYS, Backend, BackendError, ch
 from .c import BACKEND as _c
 from .c.loader import default_backend
 from .numba import BACKEND as _numba
+from .cuda import BACKEND as _cuda
 
 __all__ = ["Backend", "BackendError", "KERNEL_FUNCTIONS", "METADATA_KEYS", "BACKENDS", "REGISTRY",
            "check_metadata", "default_backend", "get", "names"]
 
-REGISTRY = {b.name: b for b in (_numba, _c)}
+REGISTRY = {b.name: b for b in (_numba, _c, _cuda)}
 BACKENDS = tuple(REGISTRY)
 
 

@@ -250,7 +250,7 @@ CASES = [
     (_set(["solver", "steps"], 0), r"^solver\.steps: must be >= 1 \(got 0\)"),
     (_set(["solver", "kind"], "rk4"), r"^solver\.kind: unknown value 'rk4'; allowed: static, implicit_euler, backward_euler, explicit"),
     (_set(["solver", "linear"], "qr"), r"^solver\.linear: unknown value 'qr'; allowed: auto, direct, cg, amg, band, pardiso, lu"),
-    (_set(["solver", "backend"], "cuda"), r"^solver\.backend: unknown value 'cuda'; allowed: numba, c"),
+    (_set(["solver", "backend"], "opencl"), r"^solver\.backend: unknown value 'opencl'; allowed: numba, c, cuda"),
     (_set(["solver", "rayleigh"], [0.1]), r"^solver\.rayleigh: expected \[alpha, beta\]"),
     (_set(["solver", "rayleigh"], [-0.1, 0.0]), r"^solver\.rayleigh\[0\]: must be >= 0"),
     (_set(["solver", "project_psd"], 1), r"^solver\.project_psd: expected true or false"),

@@ -1,0 +1,100 @@
+"""The device step (runtime.solve.device) on the host: numpy arrays and the cuda backend's host shim run
+the same code a GPU runs with CuPy, colour by colour. Its assembly equals the C backend's element-order
+assembly, and its trajectory equals an independent implicit Euler (scipy's direct solve, the C kernel)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+import tensormass as tm
+from tensormass.backends.cuda import loader as cuda_loader
+from tensormass.runtime.assembly.colouring import check_colouring
+from tensormass.runtime.base.cache import cache_dir
+from tensormass.runtime.base.dofs import node_dofs
+from tensormass.runtime.kernels.kernels import kernel_source
+from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.solve.device import DeviceStep, colour_ranges
+
+from helpers import has_c_compiler
+
+pytestmark = pytest.mark.skipif(not has_c_compiler(), reason="the host shim needs a C compiler")
+
+DT, GRAVITY = 0.01, (0.0, 0.0, -9.81)
+
+
+def _scene():
+    mesh = generate_bar((4.0, 1.0, 1.0), (8, 2, 2), "tetra")
+    cells = mesh.blocks[0].cells
+    c = tm.load_kernel("tetra", "neohookean", "gauss1", backend="c")
+    params = c._params(len(cells), 2e4, 0.3, {})
+    fixed = np.flatnonzero(mesh.points[:, 0] < 1e-9)
+    mass = np.full(len(mesh.points), 1000.0 * 4.0 / len(mesh.points))
+    return mesh, cells, c, params, fixed, mass
+
+
+def _device_step():
+    mesh, cells, c, params, fixed, mass = _scene()
+    shim = cuda_loader.load_host_shim(kernel_source("tetra", "neohookean", "gauss1", "cuda"), cache_dir())
+    return DeviceStep(shim, np, mesh.points, cells, params, fixed, mass, DT, GRAVITY, tolerance=1e-12), mesh, c
+
+
+def test_colour_ranges_hold_elements_that_share_no_node():
+    mesh = generate_bar((2.0, 1.0, 1.0), (4, 2, 2), "tetra")
+    cells = mesh.blocks[0].cells
+    order, offsets = colour_ranges(cells)
+    assert sorted(order) == list(range(len(cells))) and offsets[-1] == len(cells)
+    colours = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+    check_colouring(cells[order], colours)
+    for a, b in zip(offsets[:-1], offsets[1:]):
+        assert np.all(np.diff(order[a:b]) > 0)               # element order kept within a colour
+
+
+def test_device_assembly_equals_the_c_backends():
+    step, mesh, c = _device_step()
+    rng = np.random.default_rng(4)
+    step.u[...] = 0.02 * rng.standard_normal(step.u.shape)
+    step.assemble()
+    D = c.constants(mesh.points[mesh.blocks[0].cells], E=2e4, nu=0.3)
+    f_e, K_e = c.forces_and_stiffness(D, step.u[mesh.blocks[0].cells])
+    dofs = node_dofs(mesh.blocks[0].cells, 3)
+    f = np.zeros(step.n_dofs)
+    np.add.at(f, dofs, f_e)
+    import scipy.sparse as sp
+    rows = np.repeat(dofs, dofs.shape[1], axis=1).ravel()
+    cols = np.tile(dofs, dofs.shape[1]).ravel()
+    K = sp.csr_matrix((K_e.ravel(), (rows, cols)), shape=(step.n_dofs,) * 2)
+    np.testing.assert_allclose(step.f, f, rtol=0, atol=1e-12 * np.abs(f).max())
+    assert abs(step.K - K).max() <= 1e-12 * abs(K).max()
+
+
+def test_device_step_follows_an_independent_implicit_euler():
+    step, mesh, c = _device_step()
+    cells = mesh.blocks[0].cells
+    D = c.constants(mesh.points[cells], E=2e4, nu=0.3)
+    dofs = node_dofs(cells, 3)
+    n = step.n_dofs
+    free = np.asarray(step.free, dtype=bool)
+    mass = np.asarray(step.mass)
+    f_ext = mass * np.tile(GRAVITY, len(mesh.points))
+    u, v = np.zeros(n), np.zeros(n)
+    import scipy.sparse as sp
+    rows = np.repeat(dofs, dofs.shape[1], axis=1).ravel()
+    cols = np.tile(dofs, dofs.shape[1]).ravel()
+    tip = np.argmax(mesh.points[:, 0] + mesh.points[:, 2])
+    for k in range(6):
+        f_e, K_e = c.forces_and_stiffness(D, u.reshape(-1, 3)[cells])
+        f = np.zeros(n)
+        np.add.at(f, dofs, f_e)
+        K = sp.csr_matrix((K_e.ravel(), (rows, cols)), shape=(n, n))
+        A = (sp.diags(mass) + DT * DT * K).tocsr()[free][:, free]
+        b = DT * (f + f_ext - DT * (K @ v))
+        dv = np.zeros(n)
+        dv[free] = spla.spsolve(A.tocsc(), b[free])
+        v += dv
+        u += DT * v
+        step.advance()
+        assert step.iterations[-1] > 0
+        np.testing.assert_allclose(step.u.reshape(-1), u, rtol=0, atol=1e-8 * np.abs(u).max())
+    assert u.reshape(-1, 3)[tip, 2] < -1e-4                  # it fell
+    assert np.all(step.u[np.asarray(step.free).reshape(-1, 3)[:, 0] == 0] == 0)
