@@ -38,19 +38,19 @@ def read_metadata(path: Path) -> dict:
     return c_loader.read_metadata(path)
 
 
-def cupy():
-    """CuPy with a usable device, or BackendError saying what is missing and how to get it."""
+def cupy(instead: str = "use backend = \"c\""):
+    """CuPy with a usable device, or BackendError saying what is missing, how to get it, and (instead)
+    what to do without it."""
     try:
         import cupy as cp
     except ImportError:
-        raise BackendError(f"the cuda backend needs CuPy and an NVIDIA GPU: {INSTALL_HINT}, "
-                           "or use backend = \"c\"") from None
+        raise BackendError(f"CUDA needs CuPy and an NVIDIA GPU: {INSTALL_HINT}, or {instead}") from None
     try:
         count = cp.cuda.runtime.getDeviceCount()
     except Exception as error:          # CuPy raises its own runtime errors when there is no driver
-        raise BackendError(f"the cuda backend found no usable CUDA device ({error}); use backend = \"c\"") from None
+        raise BackendError(f"CuPy found no usable CUDA device ({error}); {instead}") from None
     if count < 1:
-        raise BackendError("the cuda backend found no CUDA device; use backend = \"c\"")
+        raise BackendError(f"CuPy found no CUDA device; {instead}")
     return cp
 
 

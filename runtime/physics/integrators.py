@@ -736,5 +736,8 @@ def outputs_for(kind: str) -> tuple:
 
 
 def make_integrator(ctx: Context):
+    if getattr(ctx.model.solver, "device", "cpu") != "cpu":          # the step's system on a GPU
+        from .device_euler import DeviceImplicitEuler
+        return DeviceImplicitEuler(ctx)
     return integrator_class(ctx.model.solver.kind)(ctx)
 

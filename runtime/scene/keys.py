@@ -238,6 +238,9 @@ KEYS = (
     Key("solver", "backend", "string", choices="backends:BACKENDS",
         default_text="c when a C compiler is found (about 1 s to compile a kernel), else numba (6 to 40 s)",
         doc="The kernel backend (both give the same results)."),
+    Key("solver", "device", "string", "cpu", choices="runtime.scene.parser:DEVICES",
+        doc="cuda: implicit_euler's stiffness assembled and solved on the GPU (tensormass[cuda]; docs/guide/gpu.md "
+            "says what such a run takes)."),
     Key("solver", "health_monitor", "boolean", True, doc="false: no health checks (the summary says so)."),
     Key("solver", "max_energy_growth", "number", 100.0, "1",
         doc="Stop when the energy balance grows by this times the scene's energy scale."),

@@ -47,7 +47,7 @@ _LOAD_OPTIONAL = ("amplitude",)
 _SOLVER = ("kind", "dt", "steps", "linear", "cg_tolerance", "cg_max_iterations", "mode", "stiffness_every",
            "stiffness_tolerance", "factor_tolerance", "newton_tolerance",
            "newton_max_iterations", "rayleigh", "project_psd", "backend", "health_monitor", "max_energy_growth",
-           "max_displacement", "on_inversion", "mass", "rho_inf", "threads", "preserve_volume")
+           "max_displacement", "on_inversion", "mass", "rho_inf", "threads", "preserve_volume", "device")
 _PROBE = ("name", "point", "region", "box")
 _OUTPUT = ("dir", "every", "fields", "picture", "plot", "view", "clip")
 _ADAPT = ("criterion", "threshold", "action", "law", "from", "back", "relative", "below", "every", "rounds")
@@ -64,6 +64,8 @@ _MAX_STEPS_WHY = "1e8 steps already take an hour on a single explicit cell, days
 # runtime.solve.solvers.METHODS (not imported here: it loads numba; a test checks they agree)
 LINEAR_SOLVERS = ("auto", "direct", "cg", "amg", "band", "pardiso", "lu")
 INVERSION_ACTIONS = ("warn", "stop")
+# runtime.solve.device.DEVICES (not imported here: it loads numba; a test checks they agree)
+DEVICES = ("cpu", "cuda")
 # solver.mode: presets of the budgeted step's keys (docs/guide/interactive.md measures them); keys given
 # beside the mode win
 SOLVER_MODES = {"exact": {},
@@ -127,6 +129,7 @@ class Parser(ValueParser):
                              "rules yet")
         _check_viscous(materials, solver, topology, adapt)
         _check_mixed(materials, solver, topology, adapt, contact, obstacles)
+        _check_device(materials, solver, loads, topology, adapt, contact, obstacles, self.shell)
         _check_cell_data_fibres(materials, topology, adapt)
         if (contact is not None or obstacles) and (topology or any(a.action == "refine" for a in adapt)):
             what = f"[[{topology[0].kind}]]" if topology else "[[adapt]] action = \"refine\""
@@ -568,6 +571,8 @@ class Parser(ValueParser):
             s.project_psd = self.boolean(t["project_psd"], "solver.project_psd")
         if "backend" in t:
             s.backend = self.string(t["backend"], "solver.backend", BACKENDS)
+        if "device" in t:
+            s.device = self.string(t["device"], "solver.device", DEVICES)
         if "health_monitor" in t:
             s.health_monitor = self.boolean(t["health_monitor"], "solver.health_monitor")
         if "preserve_volume" in t:
@@ -874,6 +879,37 @@ def _check_viscous(materials, solver, topology, adapt) -> None:
     if adapt:
         raise SceneError(f"{key}: viscous materials cannot be combined with [[adapt]] yet (their history is not "
                          "carried through its refinement or law switches; [[cut]], [[remove]] and [[refine]] keep it)")
+
+
+def _check_device(materials, solver, loads, topology, adapt, contact, obstacles, shell) -> None:
+    """solver.device = "cuda" (runtime.physics.device_euler): the step it runs and what that step holds."""
+    if solver.device == "cpu":
+        return
+    why = None
+    if solver.kind != "implicit_euler":
+        why = f"runs kind = \"implicit_euler\" (solver.kind is {solver.kind!r})"
+    elif solver.stiffness_every != 1:
+        why = "solves every step exactly: remove solver.stiffness_every (and mode = \"interactive\")"
+    elif solver.linear not in ("auto", "cg"):
+        why = f"solves with its own Jacobi-preconditioned CG: solver.linear = {solver.linear!r} does not apply (use \"auto\")"
+    elif solver.project_psd:
+        why = "takes the kernels' stiffness as it is: remove solver.project_psd"
+    elif shell:
+        why = "steps solids: shells run on the CPU"
+    elif loads.pressure:
+        why = "takes no follower pressure ([[loads.pressure]]) yet"
+    elif contact is not None or obstacles:
+        why = "takes no contact yet"
+    elif topology or adapt:
+        why = f"takes no {'[[' + topology[0].kind + ']]' if topology else '[[adapt]]'} (its matrix is built once)"
+    else:
+        for i, m in enumerate(materials):
+            if getattr(m, "formulation", "displacement") != "displacement" or getattr(m, "viscous", None):
+                why = (f"runs the displacement formulation without viscous branches (material[{i}] has "
+                       f"{'formulation = ' + repr(m.formulation) if m.formulation != 'displacement' else 'viscous'})")
+                break
+    if why is not None:
+        raise SceneError(f"solver.device: \"{solver.device}\" {why}")
 
 
 def _check_mixed(materials, solver, topology, adapt, contact, obstacles) -> None:

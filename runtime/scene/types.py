@@ -94,6 +94,7 @@ class Solver:
     kind: str = "static"                  # static | implicit_euler | backward_euler | explicit | generalized_alpha
     dt: float = 0.01
     steps: int = 1                        # time steps (dynamic) or load steps (static)
+    device: str = "cpu"                   # cpu | cuda: where implicit_euler's Newton system lives
     linear: str = "auto"                  # auto | direct | cg | amg | band | pardiso | lu (runtime/solve/solvers.py)
     cg_tolerance: float = 1e-8
     cg_max_iterations: int = 1000
