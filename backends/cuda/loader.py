@@ -96,14 +96,16 @@ def cubin_path(name: str, text: str, arch: str, cache: Path) -> Path:
     return Path(cache) / "cuda" / f"{name}-{h}-{arch}.cubin"
 
 
-def compile_cubin(source: Path, arch: str, cache: Path, writable=None) -> tuple[Path, dict | None]:
-    """The cached cubin of a generated CUDA file for arch, compiled by NVRTC when missing (no GPU is
-    needed to compile). Returns (path, record): record None when the cache had it, else the name,
-    seconds and the per-kernel registers and spills ptxas reported (see resources)."""
+def compile_cubin(source: Path, arch: str, cache: Path, writable=None, name: str | None = None
+                  ) -> tuple[Path, dict | None]:
+    """The cached cubin of a CUDA file for arch, compiled by NVRTC when missing (no GPU is needed to
+    compile). name: the file's kernel name (read from a generated file's metadata when None).
+    Returns (path, record): record None when the cache had it, else the name, seconds and the
+    per-function registers and spills ptxas reported (see resources)."""
     import time
     source = Path(source)
     text = source.read_text(encoding="utf-8")
-    name = c_loader.parse_metadata(text, source)["name"]
+    name = name or c_loader.parse_metadata(text, source)["name"]
     path = cubin_path(name, text, arch, cache)
     if writable is not None:
         writable(path.parent, f"compiling CUDA kernel {name}")
@@ -121,11 +123,12 @@ def compile_cubin(source: Path, arch: str, cache: Path, writable=None) -> tuple[
 
 
 def resources(log: str) -> dict:
-    """Per kernel function (constants, energy, ...): registers, spill bytes (stores) and stack frame
-    bytes, read from ptxas' verbose report in NVRTC's log."""
+    """Per function (a generated kernel's constants, energy, ...; the solver's own names otherwise):
+    registers, spill bytes (stores) and stack frame bytes, read from ptxas' verbose report in NVRTC's log."""
     out, current = {}, None
     for line in log.splitlines():
-        m = re.search(r"Function properties for \w+?_(" + "|".join(KERNEL_FUNCTIONS) + r")$", line.strip())
+        m = (re.search(r"Function properties for \w+?_(" + "|".join(KERNEL_FUNCTIONS) + r")$", line.strip())
+             or re.search(r"Function properties for (tm_\w+)$", line.strip()))
         if m:
             current = out.setdefault(m.group(1), {})
             continue
@@ -282,3 +285,73 @@ def _scatter_in_order(f, K, cells, pos, fg, data) -> None:
             for j in range(n_nodes):
                 start = pos[e, r, j]
                 data[start:start + per_node] += K[e, r, j * per_node:(j + 1) * per_node]
+
+
+# -- the device solver's kernels (solvers/pcg.cu) -----------------------------------------------
+PCG_SOURCE = Path(__file__).resolve().parent / "solvers" / "pcg.cu"
+PCG_FUNCTIONS = ("tm_spmv", "tm_dot_partial", "tm_dot2_partial", "tm_dot_finish", "tm_update_xrz", "tm_update_p",
+                 "tm_shift")
+PCG_BLOCK_THREADS = 256          # TM_BLOCK_THREADS of pcg.cu (its shared-memory trees need it)
+PCG_ROW_LANES = 8                # TM_ROW_LANES of pcg.cu
+_PCG_CDEF = """
+void tm_spmv(long n, const int *indptr, const int *indices, const double *data, const double *x, double *y);
+void tm_dot_partial(long n, const double *a, const double *b, double *partial);
+void tm_dot2_partial(long n, const double *a, const double *b, long blocks, double *partial);
+void tm_dot_finish(long blocks, long pairs, const double *partial, double *s, long slot);
+void tm_update_xrz(long n, const double *s, const double *p, const double *Ap, const double *inverse_diagonal,
+                   double *x, double *r, double *z);
+void tm_update_p(long n, const double *s, const double *z, double *p);
+void tm_shift(double *s);
+"""
+
+
+class PCGFunctions:
+    """The kernels of solvers/pcg.cu, called as launch(name, blocks, *args) with blocks of
+    PCG_BLOCK_THREADS threads; on the device (CuPy arrays, the current stream) or, from the host
+    shim, on numpy arrays (one block of one thread: blocks is ignored)."""
+
+    def __init__(self, functions: dict, host_ffi=None):
+        self._functions, self._ffi = functions, host_ffi
+        self.on_device = host_ffi is None
+
+    def launch(self, name: str, blocks: int, *args) -> None:
+        fn = self._functions[name]
+        if self.on_device:
+            fn((int(blocks),), (PCG_BLOCK_THREADS,), tuple(np.int64(a) if isinstance(a, int) else a for a in args))
+            return
+        fn(*(self._pointer(a) for a in args))
+
+    def _pointer(self, a):
+        if isinstance(a, np.ndarray):
+            kind = {np.dtype(np.float64): "double[]", np.dtype(np.int32): "int[]"}[a.dtype]
+            return self._ffi.from_buffer(kind, a, require_writable=False)
+        return a
+
+
+def load_pcg(cache: Path, writable=None) -> PCGFunctions:
+    """The device solver's kernels on the current device (cached cubin, like the generated kernels)."""
+    cp = cupy()
+    with _lock:
+        key = ("pcg", cp.cuda.runtime.getDevice())
+        if key not in _loaded:
+            path, _ = compile_cubin(PCG_SOURCE, device_arch(cp), cache, writable, name="tm_pcg")
+            raw = cp.RawModule(path=str(path))
+            _loaded[key] = PCGFunctions({name: raw.get_function(name) for name in PCG_FUNCTIONS})
+        return _loaded[key]
+
+
+def load_pcg_host_shim(cache: Path, writable=None) -> PCGFunctions:
+    """The device solver's kernels compiled as C99 for the host (the checks without a GPU)."""
+    import cffi
+    text = PCG_SOURCE.read_text(encoding="utf-8")
+    command, flags = c_loader.compiler(), c_loader.cflags() + list(SHIM_FLAGS)
+    lib = c_loader.library_path("tm_pcg.cuda-host", text, command, flags, cache)
+    with _lock:
+        if ("pcg-host", str(lib)) not in _loaded:
+            if not c_loader._verified(lib):
+                c_loader.build("tm_pcg", PCG_SOURCE, lib, command, flags, writable)
+            ffi = cffi.FFI()
+            ffi.cdef(_PCG_CDEF)
+            handle = ffi.dlopen(str(lib))
+            _loaded[("pcg-host", str(lib))] = PCGFunctions({name: getattr(handle, name) for name in PCG_FUNCTIONS}, ffi)
+        return _loaded[("pcg-host", str(lib))]

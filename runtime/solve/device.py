@@ -24,7 +24,7 @@ import numpy as np
 from ..assembly.colouring import colour_cells
 from ..base.errors import InvertedElementError, TensormassError
 
-__all__ = ["Device", "DeviceSystem", "DeviceStep", "get_device", "host_device", "colour_ranges", "jacobi_pcg",
+__all__ = ["Device", "DevicePCG", "DeviceSystem", "DeviceStep", "get_device", "host_device", "colour_ranges",
            "DEVICES"]
 
 DEVICES = ("cpu", "cuda")
@@ -37,6 +37,7 @@ class Device:
     name: str
     xp: object
     load: Callable
+    pcg: Callable                     # () -> backends.cuda.loader.PCGFunctions
 
     def csr(self, data, indices, indptr, n: int):
         """A CSR matrix on this device sharing data (updated in place by the assembly)."""
@@ -73,9 +74,19 @@ def _host_load(element, law, quadrature):
         raise TensormassError(str(error)) from None
 
 
+def _cache_call(function):
+    from ..base.cache import cache_dir, writable_cache_dir
+    from ... import backends
+    try:
+        return function(cache_dir(), writable_cache_dir)
+    except backends.BackendError as error:
+        raise TensormassError(str(error)) from None
+
+
 def host_device() -> Device:
     """numpy arrays and the cuda backend's host shim: the device code path, checked on the host."""
-    return Device("cuda (host shim)", np, _host_load)
+    from ...backends.cuda import loader
+    return Device("cuda (host shim)", np, _host_load, lambda: _cache_call(loader.load_pcg_host_shim))
 
 
 def get_device(name: str) -> Device:
@@ -88,7 +99,8 @@ def get_device(name: str) -> Device:
         cp = cupy(instead="leave solver.device out (the step then runs on the CPU)")
     except BackendError as error:
         raise TensormassError(f"solver.device = \"cuda\": {error}") from None
-    return Device("cuda", cp, _cuda_load)
+    from ...backends.cuda import loader
+    return Device("cuda", cp, _cuda_load, lambda: _cache_call(loader.load_pcg))
 
 
 def colour_ranges(cells) -> tuple[np.ndarray, np.ndarray]:
@@ -100,35 +112,93 @@ def colour_ranges(cells) -> tuple[np.ndarray, np.ndarray]:
     return order, offsets
 
 
-def jacobi_pcg(xp, A, b, diagonal, tolerance: float, max_iterations: int, x0=None, check_every: int = 1):
-    """x with |A x - b| <= tolerance |b| by conjugate gradients preconditioned by the diagonal;
-    returns (x, iterations). A: a CSR matrix of xp (symmetric positive definite). The residual norm
-    crosses to the host every check_every iterations only (a GPU waits for nothing in between)."""
-    x = xp.zeros_like(b) if x0 is None else x0.copy()
-    r = b - A @ x if x0 is not None else b.copy()
-    target = tolerance * float(xp.linalg.norm(b))
-    if target == 0.0:
-        return xp.zeros_like(b), 0
-    if float(xp.linalg.norm(r)) <= target:
-        return x, 0
-    inverse = 1.0 / diagonal
-    z = inverse * r
-    p = z.copy()
-    rz = r @ z
-    for iteration in range(1, max_iterations + 1):
-        Ap = A @ p
-        alpha = rz / (p @ Ap)
-        x += alpha * p
-        r -= alpha * Ap
-        if iteration % check_every == 0 and float(xp.linalg.norm(r)) <= target:
-            return x, iteration
-        z = inverse * r
-        rz, rz_old = r @ z, rz
-        p = z + (rz / rz_old) * p
-    if float(xp.linalg.norm(r)) <= target:
-        return x, max_iterations
-    raise TensormassError(f"the device CG did not reach a relative residual of {tolerance:g} in {max_iterations} "
-                          "iterations (solver.cg_max_iterations)")
+class DevicePCG:
+    """Jacobi-preconditioned CG whose iterations run on the device (backends/cuda/solvers/pcg.cu): every
+    check_every iterations are one CUDA graph launch on a GPU (captured at the first solve), and only
+    r.r crosses to the host between them. On the host shim the same kernels run in a loop.
+
+    pcg = DevicePCG(device, pattern.indptr, pattern.indices, n)
+    x, iterations = pcg.solve(data, b, diagonal, tolerance, max_iterations, x0)   # |A x - b| <= tol |b|
+    """
+
+    def __init__(self, device: Device, indptr, indices, n: int, check_every: int = 8):
+        from ...backends.cuda.loader import PCG_BLOCK_THREADS, PCG_ROW_LANES
+        xp = device.xp
+        self.device, self.xp, self.n, self.check_every = device, xp, int(n), int(check_every)
+        self.kernels = device.pcg()
+        if len(indices) >= 2**31:
+            raise TensormassError("the device CG indexes the matrix with int32: more than 2^31 nonzeros")
+        self.indptr = xp.asarray(np.asarray(indptr, dtype=np.int32))
+        self.indices = xp.asarray(np.asarray(indices, dtype=np.int32))
+        # launch shapes from the sizes alone: the same sums in the same order, run after run
+        self.row_blocks = max(1, min(-(-self.n * PCG_ROW_LANES // PCG_BLOCK_THREADS), 65535))
+        self.blocks = max(1, min(-(-self.n // PCG_BLOCK_THREADS), 1024))
+        self.x, self.r, self.z, self.p, self.Ap, self.inverse = (xp.zeros(self.n) for _ in range(6))
+        self.s = xp.zeros(4)
+        self.partial = xp.zeros(2 * self.blocks)
+        self._graph = None
+
+    def _iteration(self, data) -> None:
+        launch, n, b = self.kernels.launch, self.n, self.blocks
+        launch("tm_spmv", self.row_blocks, n, self.indptr, self.indices, data, self.p, self.Ap)
+        launch("tm_dot_partial", b, n, self.p, self.Ap, self.partial)
+        launch("tm_dot_finish", 1, b, 1, self.partial, self.s, 1)
+        launch("tm_update_xrz", b, n, self.s, self.p, self.Ap, self.inverse, self.x, self.r, self.z)
+        launch("tm_dot2_partial", b, n, self.r, self.z, b, self.partial)
+        launch("tm_dot_finish", 1, b, 2, self.partial, self.s, 2)
+        launch("tm_update_p", b, n, self.s, self.z, self.p)
+        launch("tm_shift", 1, self.s)
+
+    def _iterations(self, data) -> None:
+        """check_every iterations: a captured CUDA graph on a GPU (the arrays it reads keep their
+        addresses: data is the caller's matrix buffer, updated in place between solves)."""
+        if not self.kernels.on_device:
+            for _ in range(self.check_every):
+                self._iteration(data)
+            return
+        cp = self.xp
+        key = data.data.ptr
+        if self._graph is None or self._graph[0] != key:
+            stream = cp.cuda.Stream(non_blocking=True)
+            with stream:
+                stream.begin_capture()
+                for _ in range(self.check_every):
+                    self._iteration(data)
+                graph = stream.end_capture()
+            self._graph = (key, graph, stream)
+        _, graph, stream = self._graph
+        graph.launch(stream=stream)
+        stream.synchronize()
+
+    def solve(self, data, b, diagonal, tolerance: float, max_iterations: int, x0=None):
+        xp = self.xp
+        norm_b = float(xp.linalg.norm(b))
+        if norm_b == 0.0:
+            return xp.zeros(self.n), 0
+        target = (tolerance * norm_b) ** 2
+        self.inverse[...] = 1.0 / diagonal
+        if x0 is None:
+            self.x.fill(0.0)
+            self.r[...] = b
+        else:
+            self.x[...] = x0
+            self.kernels.launch("tm_spmv", self.row_blocks, self.n, self.indptr, self.indices, data, self.x, self.Ap)
+            self.r[...] = b - self.Ap
+        self.z[...] = self.inverse * self.r
+        self.p[...] = self.z
+        self.s[0] = float(self.r @ self.z)
+        rr = float(self.r @ self.r)
+        iterations = 0
+        while rr > target:
+            if iterations >= max_iterations:
+                raise TensormassError(f"the device CG did not reach a relative residual of {tolerance:g} in "
+                                      f"{max_iterations} iterations (solver.cg_max_iterations)")
+            self._iterations(data)
+            iterations += self.check_every
+            rr = float(self.s[3])
+            if not np.isfinite(rr):
+                raise TensormassError("the device CG broke down (the step's matrix is not positive definite)")
+        return self.x.copy(), iterations
 
 
 class _DevicePart:
@@ -166,7 +236,7 @@ class DeviceSystem:
     whose rows and columns the step replaces by the identity."""
 
     def __init__(self, device: Device, pattern, parts, mass_data, fixed_dofs, cg_tolerance=1e-8,
-                 cg_max_iterations=1000, check_every: int = 1):
+                 cg_max_iterations=1000, check_every: int = 8):
         xp = device.xp
         self.device, self.xp = device, xp
         self.n = pattern.n_dofs
@@ -187,6 +257,7 @@ class DeviceSystem:
         self.K = device.csr(self.data, indices, indptr, self.n)
         self.A = device.csr(self.system, indices, indptr, self.n)
         self.M = device.csr(self.mass_data, indices, indptr, self.n)
+        self.pcg = DevicePCG(device, pattern.indptr, pattern.indices, self.n, check_every)
         self._dv = None
         self.iterations = 0
 
@@ -222,9 +293,7 @@ class DeviceSystem:
         self.system[self.constrained] = 0.0
         self.system[self.fixed_diagonal] = 1.0
         diagonal = diagonal_before * self.free + (1.0 - self.free)
-        dv, its = jacobi_pcg(xp, self.A, b, diagonal, self.cg_tolerance, self.cg_max_iterations,
-                             x0=self._dv if self._dv is not None and self._dv.shape == b.shape else None,
-                             check_every=self.check_every)
+        dv, its = self.pcg.solve(self.system, b, diagonal, self.cg_tolerance, self.cg_max_iterations, x0=self._dv)
         self.iterations += its
         self._dv = dv.copy()
         dv += lift
@@ -244,7 +313,7 @@ class DeviceStep:
     scene runs the integrator runtime.physics.device_euler)."""
 
     def __init__(self, device: Device, points, cells, kernel, params, fixed_nodes, node_mass, dt: float, body_force,
-                 tolerance: float = 1e-10, max_iterations: int = 5000, check_every: int = 1):
+                 tolerance: float = 1e-10, max_iterations: int = 5000, check_every: int = 8):
         from ..assembly.pattern import SparsePattern
         from ..base.dofs import node_dofs
         from ..kernels.fused import node_block_positions
@@ -278,7 +347,7 @@ class DeviceStep:
 
     def advance(self) -> int:
         """One step, every array staying on the device; returns the CG iterations it took."""
-        s, xp, h = self._s, self.xp, self.dt
+        s, h = self._s, self.dt
         f_int, _ = s.assemble(self.u)
         Kv = s.K @ self.v
         rhs = h * (f_int + self.f_ext - h * Kv) * s.free
@@ -286,7 +355,7 @@ class DeviceStep:
         diagonal = s.system[s.diagonal] * s.free + (1.0 - s.free)
         s.system[s.constrained] = 0.0
         s.system[s.fixed_diagonal] = 1.0
-        dv, its = jacobi_pcg(xp, s.A, rhs, diagonal, s.cg_tolerance, s.cg_max_iterations, check_every=s.check_every)
+        dv, its = s.pcg.solve(s.system, rhs, diagonal, s.cg_tolerance, s.cg_max_iterations)
         self.v += dv
         self.u += h * self.v
         self.iterations.append(its)

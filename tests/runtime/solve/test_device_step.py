@@ -11,6 +11,7 @@ import tensormass as tm
 from tensormass.runtime.assembly.colouring import check_colouring
 from tensormass.runtime.base.dofs import node_dofs
 from tensormass.runtime.mesh.bars import generate_bar
+from tensormass.runtime.base.errors import TensormassError
 from tensormass.runtime.solve.device import DeviceStep, colour_ranges, host_device
 
 from helpers import has_c_compiler
@@ -95,3 +96,41 @@ def test_device_step_follows_an_independent_implicit_euler():
         np.testing.assert_allclose(step.u.reshape(-1), u, rtol=0, atol=1e-8 * np.abs(u).max())
     assert u.reshape(-1, 3)[tip, 2] < -1e-4                  # it fell
     assert np.all(step.u[~free] == 0)
+
+
+def _spd_system(n_cells=(6, 2, 2)):
+    import scipy.sparse as sp
+    mesh = generate_bar((3.0, 1.0, 1.0), n_cells, "tetra")
+    cells = mesh.blocks[0].cells
+    c = tm.load_kernel("tetra", "neohookean", "gauss1", backend="c")
+    D = c.constants(mesh.points[cells], E=2e4, nu=0.3)
+    _, K_e = c.forces_and_stiffness(D, np.zeros((len(cells), 12)))
+    dofs = node_dofs(cells, 3)
+    rows = np.repeat(dofs, 12, axis=1).ravel()
+    cols = np.tile(dofs, 12).ravel()
+    n = mesh.points.size
+    A = (sp.csr_matrix((K_e.ravel(), (rows, cols)), shape=(n, n)) + sp.eye(n) * 50.0).tocsr()
+    A.sort_indices()
+    return A
+
+
+def test_device_pcg_solves_like_a_direct_solver_and_repeats_its_bits():
+    from tensormass.runtime.solve.device import DevicePCG
+    A = _spd_system()
+    rng = np.random.default_rng(5)
+    b = rng.standard_normal(A.shape[0])
+    pcg = DevicePCG(host_device(), A.indptr, A.indices, A.shape[0], check_every=4)
+    data = np.ascontiguousarray(A.data)
+    x, its = pcg.solve(data, b, A.diagonal(), 1e-12, 10000)
+    exact = spla.spsolve(A.tocsc(), b)
+    assert its > 0 and its % 4 == 0
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
+    np.testing.assert_allclose(x, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+    again, its_again = pcg.solve(data, b, A.diagonal(), 1e-12, 10000)
+    assert its_again == its and np.array_equal(again, x)
+    warm, its_warm = pcg.solve(data, b, A.diagonal(), 1e-12, 10000, x0=x + 1e-9)      # a warm start
+    assert its_warm < its and np.linalg.norm(A @ warm - b) <= 1e-12 * np.linalg.norm(b)
+    zero, none = pcg.solve(data, np.zeros_like(b), A.diagonal(), 1e-12, 10000)
+    assert none == 0 and not zero.any()
+    with pytest.raises(TensormassError, match="did not reach a relative residual of 1e-14 in 8 iterations"):
+        pcg.solve(data, b, A.diagonal(), 1e-14, 8)
