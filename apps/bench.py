@@ -48,6 +48,7 @@ from .bench_cutting import add_cutting_command
 from .bench_contact import add_contact_command
 from .bench_batch import add_batch_command
 from .bench_steps import add_steps_command
+from .bench_gpu import add_gpu_command
 from .classic import LAWS, load_classic
 from .machine import format_machine, machine_info
 
@@ -526,6 +527,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_compile)
 
     add_steps_command(sub)
+    add_gpu_command(sub)
     add_integrators_command(sub)
     add_assembly_command(sub)
     add_organ_command(sub)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pytest
 
 from tensormass.generator.elements import element as reference
 from tensormass.runtime.base.samples import random_elements
@@ -162,3 +163,28 @@ box = {[[-1] * a + [-0.01] + [-1] * (2 - a), [2] * a + [0.01] + [2] * (2 - a)]}
 components = [{a}]
 """ for a in range(3))
 
+
+
+def _cuda_device_present() -> bool:
+    from tensormass.runtime.base.errors import TensormassError
+    from tensormass.runtime.solve.device import get_device
+    try:
+        get_device("cuda")
+    except TensormassError:
+        return False
+    return True
+
+
+def device_params() -> list:
+    """The array devices the device tests run on: the host shim (numpy, the CUDA files compiled as C;
+    needs a C compiler) always, and the GPU (CuPy) where one is present."""
+    from tensormass.runtime.solve.device import get_device, host_device
+    return [pytest.param(host_device, id="host-shim",
+                         marks=pytest.mark.skipif(not has_c_compiler(), reason="the host shim needs a C compiler")),
+            pytest.param(lambda: get_device("cuda"), id="cuda",
+                         marks=pytest.mark.skipif(not _cuda_device_present(), reason="needs CuPy and a CUDA device"))]
+
+
+def to_host(a) -> np.ndarray:
+    """A numpy copy of a numpy or CuPy array."""
+    return np.asarray(a.get() if hasattr(a, "get") else a)

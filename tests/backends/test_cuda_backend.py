@@ -120,6 +120,7 @@ def _has_nvrtc() -> bool:
     return True
 
 
+@pytest.mark.heavy            # CI's heavy step installs NVRTC
 @pytest.mark.skipif(not _has_nvrtc(), reason="NVRTC is not installed (pip install 'tensormass[cuda]')")
 def test_nvrtc_compiles_and_caches_a_generated_kernel(tmp_path):
     """NVRTC needs no GPU: the real CUDA compiler checks the printed file, and ptxas reports what a
@@ -144,6 +145,14 @@ def test_nvrtc_compiles_every_element_type(element, tmp_path):
     quadrature = "gauss1" if element in ("tetra", "triangle") else "gauss2"
     _, record = cuda_loader.compile_cubin(kernel_source(element, "neohookean", quadrature, "cuda"), "sm_90", tmp_path)
     assert set(record["resources"]) == set(backends.KERNEL_FUNCTIONS)
+
+
+@pytest.mark.heavy
+@pytest.mark.skipif(not _has_nvrtc(), reason="NVRTC is not installed (pip install 'tensormass[cuda]')")
+def test_nvrtc_compiles_the_device_cg(tmp_path):
+    _, record = cuda_loader.compile_cubin(cuda_loader.PCG_SOURCE, "sm_90", tmp_path, name="tm_pcg")
+    assert set(record["resources"]) == set(cuda_loader.PCG_FUNCTIONS)
+    assert all(r["spill_bytes"] == 0 for r in record["resources"].values())
 
 
 def _has_device() -> bool:

@@ -1,7 +1,7 @@
-"""[solver] device = "cuda" through the whole run, checked on the host: the integrator's device system
-(runtime.solve.device) runs on numpy arrays with the cuda backend's host shim, and its run follows the
-CPU's implicit Euler (direct solves) on a two-part mesh with damping, a moving boundary, gravity and a
-nodal force. Scenes it does not take are refused naming solver.device."""
+"""[solver] device = "cuda" through the whole run, on the host shim (the integrator's device system on numpy
+arrays with the cuda backend's files compiled as C) and, where present, the GPU: the run follows the CPU's
+implicit Euler (direct solves) with damping, a moving boundary, gravity and a nodal force, on one part and
+on four parts sharing nodes. Scenes it does not take are refused naming solver.device."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +13,7 @@ from tensormass.runtime.physics.device_euler import DeviceImplicitEuler
 from tensormass.runtime.scene.parser import DEVICES
 from tensormass.runtime.solve import device as device_module
 
-from helpers import has_c_compiler
+from helpers import device_params
 
 SCENE = """
 [mesh]
@@ -62,12 +62,13 @@ def _run(device, mass="lumped", extra="", element="tetra"):
     return sim, summary
 
 
-@pytest.mark.skipif(not has_c_compiler(), reason="the host shim needs a C compiler")
+@pytest.mark.parametrize("make_device", device_params())
 @pytest.mark.parametrize("mass,element", [("lumped", "tetra"), ("consistent", "tetra"),
                                           pytest.param("lumped", "mixed", marks=pytest.mark.heavy)])
-def test_device_run_follows_the_cpu_run(monkeypatch, mass, element):
+def test_device_run_follows_the_cpu_run(monkeypatch, mass, element, make_device):
     """mixed: hexahedron, wedge, pyramid and tetra parts sharing nodes."""
-    monkeypatch.setattr(DeviceImplicitEuler, "device_factory", staticmethod(lambda name: device_module.host_device()))
+    device = make_device()
+    monkeypatch.setattr(DeviceImplicitEuler, "device_factory", staticmethod(lambda name: device))
     cpu, s_cpu = _run(None, mass, 'linear = "direct"', element)
     dev, s_dev = _run("cuda", mass, "cg_tolerance = 1e-13\ncg_max_iterations = 5000", element)
     u = cpu.displacement

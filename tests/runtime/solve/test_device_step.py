@@ -1,6 +1,7 @@
-"""The device step (runtime.solve.device) on the host: numpy arrays and the cuda backend's host shim run
-the same code a GPU runs with CuPy, colour by colour. Its assembly equals the C backend's element-order
-assembly, and its trajectory equals an independent implicit Euler (scipy's direct solve, the C kernel)."""
+"""The device step (runtime.solve.device) on every device under test: the host shim (numpy arrays and the
+cuda backend's files compiled as C run the code a GPU runs with CuPy) and, where present, the GPU. Its
+colour-by-colour assembly equals the C backend's, its CG solves like a direct solver, and its trajectory
+equals an independent implicit Euler (scipy's direct solve, the C kernel)."""
 from __future__ import annotations
 
 import numpy as np
@@ -12,11 +13,9 @@ from tensormass.runtime.assembly.colouring import check_colouring
 from tensormass.runtime.base.dofs import node_dofs
 from tensormass.runtime.mesh.bars import generate_bar
 from tensormass.runtime.base.errors import TensormassError
-from tensormass.runtime.solve.device import DeviceStep, colour_ranges, host_device
+from tensormass.runtime.solve.device import DevicePCG, DeviceStep, colour_ranges
 
-from helpers import has_c_compiler
-
-pytestmark = pytest.mark.skipif(not has_c_compiler(), reason="the host shim needs a C compiler")
+from helpers import device_params, to_host
 
 DT, GRAVITY = 0.01, (0.0, 0.0, -9.81)
 
@@ -31,9 +30,14 @@ def _scene():
     return mesh, cells, c, params, fixed, mass
 
 
-def _device_step():
+@pytest.fixture(params=device_params())
+def device(request):
+    return request.param()
+
+
+def _device_step(device):
     mesh, cells, c, params, fixed, mass = _scene()
-    step = DeviceStep(host_device(), mesh.points, cells, c, params, fixed, mass, DT, GRAVITY, tolerance=1e-12)
+    step = DeviceStep(device, mesh.points, cells, c, params, fixed, mass, DT, GRAVITY, tolerance=1e-12)
     return step, mesh, c
 
 
@@ -48,13 +52,13 @@ def test_colour_ranges_hold_elements_that_share_no_node():
         assert np.all(np.diff(order[a:b]) > 0)               # element order kept within a colour
 
 
-def test_device_assembly_equals_the_c_backends():
-    step, mesh, c = _device_step()
-    rng = np.random.default_rng(4)
-    step.u[...] = 0.02 * rng.standard_normal(step.u.shape)
-    f_dev, _ = step.system.assemble(step.u)
+def test_device_assembly_equals_the_c_backends(device):
+    step, mesh, c = _device_step(device)
+    u = 0.02 * np.random.default_rng(4).standard_normal(step.n_dofs)
+    f_dev, _ = step.system.assemble(device.xp.asarray(u))
+    f_dev, K_dev = to_host(f_dev), step.system.K.get() if hasattr(step.system.K, "get") else step.system.K
     D = c.constants(mesh.points[mesh.blocks[0].cells], E=2e4, nu=0.3)
-    f_e, K_e = c.forces_and_stiffness(D, step.u.reshape(-1, 3)[mesh.blocks[0].cells])
+    f_e, K_e = c.forces_and_stiffness(D, u.reshape(-1, 3)[mesh.blocks[0].cells])
     dofs = node_dofs(mesh.blocks[0].cells, 3)
     f = np.zeros(step.n_dofs)
     np.add.at(f, dofs, f_e)
@@ -63,17 +67,17 @@ def test_device_assembly_equals_the_c_backends():
     cols = np.tile(dofs, dofs.shape[1]).ravel()
     K = sp.csr_matrix((K_e.ravel(), (rows, cols)), shape=(step.n_dofs,) * 2)
     np.testing.assert_allclose(f_dev, f, rtol=0, atol=1e-12 * np.abs(f).max())
-    assert abs(step.system.K - K).max() <= 1e-12 * abs(K).max()
+    assert abs(K_dev - K).max() <= 1e-12 * abs(K).max()
 
 
-def test_device_step_follows_an_independent_implicit_euler():
-    step, mesh, c = _device_step()
+def test_device_step_follows_an_independent_implicit_euler(device):
+    step, mesh, c = _device_step(device)
     cells = mesh.blocks[0].cells
     D = c.constants(mesh.points[cells], E=2e4, nu=0.3)
     dofs = node_dofs(cells, 3)
     n = step.n_dofs
-    free = step.system.free.astype(bool)
-    mass = step.system.mass_data[step.pattern.diagonal]
+    free = to_host(step.system.free).astype(bool)
+    mass = to_host(step.system.mass_data)[step.pattern.diagonal]
     f_ext = mass * np.tile(GRAVITY, len(mesh.points))
     u, v = np.zeros(n), np.zeros(n)
     import scipy.sparse as sp
@@ -93,9 +97,9 @@ def test_device_step_follows_an_independent_implicit_euler():
         u += DT * v
         step.advance()
         assert step.iterations[-1] > 0
-        np.testing.assert_allclose(step.u.reshape(-1), u, rtol=0, atol=1e-8 * np.abs(u).max())
+        np.testing.assert_allclose(to_host(step.u), u, rtol=0, atol=1e-8 * np.abs(u).max())
     assert u.reshape(-1, 3)[tip, 2] < -1e-4                  # it fell
-    assert np.all(step.u[~free] == 0)
+    assert np.all(to_host(step.u)[~free] == 0)
 
 
 def _spd_system(n_cells=(6, 2, 2)):
@@ -114,23 +118,27 @@ def _spd_system(n_cells=(6, 2, 2)):
     return A
 
 
-def test_device_pcg_solves_like_a_direct_solver_and_repeats_its_bits():
-    from tensormass.runtime.solve.device import DevicePCG
+def test_device_pcg_solves_like_a_direct_solver_and_repeats_its_bits(device):
     A = _spd_system()
     rng = np.random.default_rng(5)
-    b = rng.standard_normal(A.shape[0])
-    pcg = DevicePCG(host_device(), A.indptr, A.indices, A.shape[0], check_every=4)
-    data = np.ascontiguousarray(A.data)
-    x, its = pcg.solve(data, b, A.diagonal(), 1e-12, 10000)
+    xp = device.xp
+    b_host = rng.standard_normal(A.shape[0])
+    b, diagonal = xp.asarray(b_host), xp.asarray(A.diagonal())
+    pcg = DevicePCG(device, A.indptr, A.indices, A.shape[0], check_every=4)
+    data = xp.asarray(np.ascontiguousarray(A.data))
+    x, its = pcg.solve(data, b, diagonal, 1e-12, 10000)
+    x = to_host(x)
+    b = b_host
     exact = spla.spsolve(A.tocsc(), b)
     assert its > 0 and its % 4 == 0
     assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
     np.testing.assert_allclose(x, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
-    again, its_again = pcg.solve(data, b, A.diagonal(), 1e-12, 10000)
-    assert its_again == its and np.array_equal(again, x)
-    warm, its_warm = pcg.solve(data, b, A.diagonal(), 1e-12, 10000, x0=x + 1e-9)      # a warm start
-    assert its_warm < its and np.linalg.norm(A @ warm - b) <= 1e-12 * np.linalg.norm(b)
-    zero, none = pcg.solve(data, np.zeros_like(b), A.diagonal(), 1e-12, 10000)
-    assert none == 0 and not zero.any()
+    bd = xp.asarray(b)
+    again, its_again = pcg.solve(data, bd, diagonal, 1e-12, 10000)
+    assert its_again == its and np.array_equal(to_host(again), x)          # the same bits, solve after solve
+    warm, its_warm = pcg.solve(data, bd, diagonal, 1e-12, 10000, x0=xp.asarray(x + 1e-9))      # a warm start
+    assert its_warm < its and np.linalg.norm(A @ to_host(warm) - b) <= 1e-12 * np.linalg.norm(b)
+    zero, none = pcg.solve(data, xp.zeros_like(bd), diagonal, 1e-12, 10000)
+    assert none == 0 and not to_host(zero).any()
     with pytest.raises(TensormassError, match="did not reach a relative residual of 1e-14 in 8 iterations"):
-        pcg.solve(data, b, A.diagonal(), 1e-14, 8)
+        pcg.solve(data, bd, diagonal, 1e-14, 8)
