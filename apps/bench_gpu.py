@@ -13,6 +13,8 @@ ratio and the target:
             the largest difference of the two runs' displacements over 10 steps, relative
   large     the device step of a 1 000 000-tetra body
   scaling   device and CPU step time over body size (the thesis' B15 curve): JSON, and a PNG beside it
+  threads   what one thread of each kernel uses on sm_90 (registers, spills, stack), from NVRTC's ptxas
+            report: no GPU needed (printed wherever NVRTC is installed)
 --host runs every line on the host shim (numpy arrays, the CUDA files compiled as C) at small sizes:
 it checks that the benchmark runs, on a machine without a GPU. Its times are not GPU times.
 """
@@ -210,6 +212,29 @@ def organ_mesh_file(path: str | None) -> Path | None:
         return None
 
 
+def thread_resources(arch: str = "sm_90") -> list | None:
+    """Registers, spills and stack of forces_and_stiffness and the fused scatter of each KERNELS entry
+    and of the CG's kernels, compiled by NVRTC for arch (None without NVRTC)."""
+    import tempfile
+    from .. import backends
+    from ..backends.cuda import loader
+    from ..runtime.kernels.kernels import kernel_source
+    rows = []
+    try:
+        with tempfile.TemporaryDirectory(prefix="tensormass-nvrtc-") as folder:
+            for element, law, quadrature, _ in KERNELS:
+                _, record = loader.compile_cubin(kernel_source(element, law, quadrature, "cuda"), arch, Path(folder))
+                for kind in ("forces_and_stiffness", "forces_and_stiffness_scatter"):
+                    rows.append({"kernel": f"{element}_{law}_{quadrature}", "function": kind,
+                                 "seconds": record["seconds"], **record["resources"][kind]})
+            _, record = loader.compile_cubin(loader.PCG_SOURCE, arch, Path(folder), name="tm_pcg")
+            for name, r in sorted(record["resources"].items()):
+                rows.append({"kernel": "device CG", "function": name, "seconds": record["seconds"], **r})
+    except backends.BackendError:
+        return None
+    return rows
+
+
 def run_gpu_bench(quick=False, host=False, organ_mesh=None, json_path=None, progress=print) -> dict:
     device = _device(host)
     small = quick or host
@@ -248,6 +273,12 @@ def run_gpu_bench(quick=False, host=False, organ_mesh=None, json_path=None, prog
     for r in report["scaling"]:
         progress(f"scaling  {r['cells']:>8} tetra: device step {1e3 * r['device_step_s']:9.2f} ms, CPU run step "
                  f"{1e3 * r['cpu_step_s']:9.2f} ms, x{r['cpu_step_s'] / r['device_step_s']:.1f}")
+    report["threads"] = thread_resources()
+    for r in report["threads"] or []:
+        progress(f"threads  {r['kernel']:<30} {r['function']:<30} {r['registers']:>4} registers, "
+                 f"{r['spill_bytes']:>5} B spilled, {r['stack_bytes']:>5} B stack (sm_90)")
+    if report["threads"] is None:
+        progress("threads  NVRTC is not installed: no ptxas report (pip install 'tensormass[cuda]')")
     if json_path:
         write_json_atomic(json_path, report)
         _plot(report["scaling"], Path(json_path).with_suffix(".png"), device.name)

@@ -13,24 +13,27 @@ import time
 import numpy as np
 
 from ..base.errors import TensormassError
-from ..solve import device as _device
-from .integrators import ImplicitEuler
+from .integrators import ImplicitEuler, make_integrator as make_cpu_integrator
 
 
 class DeviceImplicitEuler(ImplicitEuler):
     kind = "implicit_euler"
 
-    # the device to run on; tests point this at runtime.solve.device.host_device (the host shim)
-    device_factory = staticmethod(_device.get_device)
+    # device_factory(name) -> the Device to run on: runtime.solve.device.get_device when None (tests and
+    # `bench gpu --host` point it at the host shim); imported here, not at the top: runs without a
+    # device never load the device system
+    device_factory = None
 
     def __init__(self, ctx):
         super().__init__(ctx)
+        from ..solve import device as _device
         s = self.model.solver
-        self.device = self.device_factory(s.device)
+        self.device = (self.device_factory or _device.get_device)(s.device)
         self.system = None
         self._cg_tolerance, self._cg_max = float(s.cg_tolerance), int(s.cg_max_iterations)
 
-    def _build(self) -> _device.DeviceSystem:
+    def _build(self):
+        from ..solve import device as _device
         ctx, model = self.ctx, self.model
         asm = ctx.asm
         parts = []
@@ -63,3 +66,11 @@ class DeviceImplicitEuler(ImplicitEuler):
         u1 = u + h * v1
         ctx.residual = (u1, ctx.reduce(residual))
         return u1, v1
+
+
+def make_integrator(ctx):
+    """The run's integrator: the device step where solver.device names a device, else the CPU's
+    integrator of solver.kind (the scene parser allows a device with implicit_euler only)."""
+    if getattr(ctx.model.solver, "device", "cpu") != "cpu":
+        return DeviceImplicitEuler(ctx)
+    return make_cpu_integrator(ctx)

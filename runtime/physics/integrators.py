@@ -736,8 +736,6 @@ def outputs_for(kind: str) -> tuple:
 
 
 def make_integrator(ctx: Context):
-    if getattr(ctx.model.solver, "device", "cpu") != "cpu":          # the step's system on a GPU
-        from .device_euler import DeviceImplicitEuler
-        return DeviceImplicitEuler(ctx)
+    """The integrator of the model's solver.kind (solver.device: runtime.physics.device_euler.make_integrator)."""
     return integrator_class(ctx.model.solver.kind)(ctx)
 

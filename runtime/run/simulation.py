@@ -27,7 +27,8 @@ from ..kernels import hourglass as _hourglass
 from ..physics.health import HealthMonitor
 from .history import History, units as _units
 from ..physics.newton import Context
-from ..physics.integrators import Explicit, make_integrator, stable_time_step
+from ..physics.device_euler import make_integrator
+from ..physics.integrators import Explicit, stable_time_step
 from ..model.model import Model
 from ..physics import reactions as _reactions
 from ..assembly.assembly import Assembler
