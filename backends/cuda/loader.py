@@ -274,17 +274,15 @@ class CudaModule:
 
 
 def _scatter_in_order(f, K, cells, pos, fg, data) -> None:
-    """fg += f and data += K element after element (the order of the C backend's scatter)."""
+    """fg += f and data += K, each entry's terms added element after element (the order of the C
+    backend's scatter: numpy's add.at adds in the order of its indices)."""
     n, n_dofs = f.shape
     n_nodes = cells.shape[1]
     per_node = n_dofs // n_nodes
-    for e in range(n):
-        for i in range(n_nodes):
-            fg[cells[e, i] * per_node:(cells[e, i] + 1) * per_node] += f[e, i * per_node:(i + 1) * per_node]
-        for r in range(n_dofs):
-            for j in range(n_nodes):
-                start = pos[e, r, j]
-                data[start:start + per_node] += K[e, r, j * per_node:(j + 1) * per_node]
+    dofs = (np.asarray(cells, dtype=np.int64)[:, :, None] * per_node + np.arange(per_node)).reshape(n, n_dofs)
+    np.add.at(fg, dofs.ravel(), f.ravel())
+    entries = np.asarray(pos, dtype=np.int64)[..., None] + np.arange(per_node)          # (n, n_dofs, n_nodes, per_node)
+    np.add.at(data, entries.ravel(), K.reshape(n, n_dofs, n_nodes, per_node).ravel())
 
 
 # -- the device solver's kernels (solvers/pcg.cu) -----------------------------------------------
