@@ -55,6 +55,7 @@ DEFERRED = {
     "report": (".reports", "add_report_command",
                "accuracy against run time; stability on stiff and extreme cases"),
     "plot": (".plot", "add_plot_command", "draw the per-step history of a run summary (JSON) as a PNG"),
+    "mesh": (".mesh_tools", "add_mesh_command", "mesh tools: simplify a surface (precision alpha), regenerate a volume"),
 }
 
 
@@ -236,8 +237,8 @@ def build_parser(full=None) -> argparse.ArgumentParser:
     # the order of `tensormass --help`: generate, run, demo, batch, bench, report, plot
     _add_deferred(sub, "generate", full)
     add_commands(sub)                      # run, demo
-    for name in ("batch", "bench", "report", "plot"):
-        _add_deferred(sub, name, full)     # batch: dask; bench: kernels, compile, steps, ...; report; plot
+    for name in ("batch", "bench", "report", "plot", "mesh"):
+        _add_deferred(sub, name, full)     # batch: dask; bench: kernels, compile, steps, ...; report; plot; mesh
     return parser
 
 
