@@ -39,7 +39,7 @@ def _gmsh():
     return gmsh
 
 
-def _surface_of_model(gmsh) -> tuple[np.ndarray, np.ndarray]:
+def surface_of_model(gmsh) -> tuple[np.ndarray, np.ndarray]:
     """The triangles of every surface of the current gmsh model, nodes renumbered from 0."""
     tags, coords, _ = gmsh.model.mesh.getNodes()
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
@@ -83,7 +83,7 @@ def stand_in(name: str) -> tuple[np.ndarray, np.ndarray, float]:
         gmsh.option.setNumber("Mesh.MeshSizeMin", h)
         gmsh.option.setNumber("Mesh.MeshSizeMax", h)
         gmsh.model.mesh.generate(2)
-        points, triangles = _surface_of_model(gmsh)
+        points, triangles = surface_of_model(gmsh)
     finally:
         gmsh.finalize()
     return points, triangles, size_organ

@@ -35,7 +35,7 @@ from .container import MeshError, topological_dim
 from .io import read_meshio
 
 __all__ = ["plate", "strip", "icosphere", "sphere_with_triangles", "cylinder", "hemisphere", "orient_triangles",
-           "winding_conflicts", "read_shell_triangles"]
+           "winding_conflicts", "read_shell_triangles", "shell_groups"]
 
 PATTERNS = ("right", "cross")
 
@@ -317,8 +317,28 @@ def orient_triangles(points, triangles, what: str = "the surface"):
     return np.where(flip[:, None], triangles[:, ::-1], triangles).astype(np.int64), notes
 
 
-def read_shell_triangles(path):
-    """(points (n, 3), triangles, notes) of a surface mesh file read as shells: its 3-node triangles
+def shell_groups(m, n_triangles: int) -> tuple:
+    """(tags, groups) of a meshio mesh read as shells: the physical tag of each triangle (blocks in
+    order, as read_shell_triangles stacks them; None when the file has none) and a Group of shell
+    cells (dim 2) per tag, named by the file's physical names."""
+    from .mesh_groups import Group
+    data = getattr(m, "cell_data", {}) or {}
+    key = next((k for k in ("gmsh:physical", "cell_tags", "medit:ref") if k in data), None)
+    if key is None:
+        return None, []
+    tags = [np.asarray(values).reshape(-1) for block, values in zip(m.cells, data[key]) if block.type == "triangle"]
+    tags = np.concatenate(tags).astype(np.int64) if tags else np.zeros(0, np.int64)
+    if len(tags) != n_triangles:
+        return None, []
+    names = {int(v[0]): name for name, v in (getattr(m, "field_data", {}) or {}).items()
+             if len(v) > 1 and int(v[1]) == 2}
+    groups = [Group(names.get(int(t)), int(t), 2, np.flatnonzero(tags == t)) for t in np.unique(tags)]
+    return tags, groups
+
+
+def read_shell_triangles(path, with_groups: bool = False):
+    """(points (n, 3), triangles, notes) of a surface mesh file read as shells (with_groups: and
+    shell_groups' (tags, groups), so that regions select its triangles): its 3-node triangles
     (curves and points left out, unused points dropped), duplicated triangles refused by id, each
     surface's windings made to agree (orient_triangles; its notes say what was turned).  Volume
     cells and quadratic triangles are refused by name.  Reading goes through mesh.read_meshio (a
@@ -352,4 +372,6 @@ def read_shell_triangles(path):
         triangles, notes = orient_triangles(points, triangles, what=str(path))
     except ValueError as exc:
         raise MeshError(str(exc)) from None
+    if with_groups:
+        return points, triangles, notes, shell_groups(m, len(triangles))
     return points, triangles, notes

@@ -36,7 +36,7 @@ from ..mesh.container import Mesh
 from ..mesh.checks import check_mesh
 from ..physics.motion import Motion
 from ..mesh.probes import PointProbe, locate_point
-from ..mesh.regions import (assign_materials as _assign, box_contains, box_tolerance, material_groups,
+from ..mesh.regions import (assign_materials as _assign, box_contains, box_tolerance, find_group, material_groups,
     prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from ..scene.types import Loads, Output, Solver
 from ..scene.formulation_check import check_element as _check_formulation_element, formulation_name
@@ -634,10 +634,12 @@ class Model:
         return any(b.type == "shell" for b in self.mesh.blocks)
 
     def _shells_in(self, load, key) -> dict:
-        """{"triangle": the shell cells whose nodes are all inside the load's box (all without one)}."""
-        if getattr(load, "region", None) not in (None, "all"):
-            raise TensormassError(f"{key}.region: a shell mesh has no named regions here; use box = [[...], [...]]")
+        """{"triangle": the shell cells of the load's region (a group of the file's triangles) whose nodes
+        are all inside its box (all cells without either)}."""
         cells = np.vstack([b.cells for b in self.mesh.blocks if b.type == "shell"])
+        if getattr(load, "region", None) not in (None, "all"):
+            group = find_group(self.mesh, load.region, f"{key}.region", dims=(2,), what="a shell load")
+            cells = cells[group.cell_ids[group.cell_ids < len(cells)]]
         if load.box is not None:
             inside = box_contains(load.box, self.mesh.points, self.box_tol)
             cells = cells[inside[cells].all(axis=1)]

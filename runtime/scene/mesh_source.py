@@ -118,10 +118,11 @@ def shell_mesh(spec):
         points, triangles = surfaces.plate(spec.size[0], spec.size[1], spec.cells[0], spec.cells[1])
     elif spec.generate == "sphere":
         points, triangles = surfaces.icosphere(spec.radius, spec.subdivisions)
-    else:       # windings made to agree across shared edges; the notes say what was turned
-        points, triangles, notes = surfaces.read_shell_triangles(spec.file)
+    tags, groups = None, []
+    if spec.file is not None:   # windings made to agree across shared edges; the notes say what was turned
+        points, triangles, notes, (tags, groups) = surfaces.read_shell_triangles(spec.file, with_groups=True)
     points = np.asarray(points, float) + np.asarray(spec.origin, float)[:3] if spec.file is None else points
-    mesh = Mesh(points, [CellBlock("shell", np.asarray(triangles, dtype=np.int64))])
+    mesh = Mesh(points, [CellBlock("shell", np.asarray(triangles, dtype=np.int64), tags)], groups)
     mesh.notes = [f"mesh.file: {note}" for note in notes] if spec.file is not None else []
     return mesh
 
