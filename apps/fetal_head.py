@@ -121,9 +121,10 @@ def main(argv=None) -> int:
     p.add_argument("path", help="where to write the mesh, or `report` for the diameters over three mesh sizes")
     p.add_argument("--size", type=float, default=SIZE)
     p.add_argument("--json", help="report: also write the rows as JSON")
+    p.add_argument("--scene", default=str(SCENE), help="report: the head's scene (default: the checkout's example)")
     args = p.parse_args(argv)
     if args.path == "report":
-        report(json_path=args.json)
+        report(json_path=args.json, scene=args.scene)
         return 0
     path = make(args.path, args.size)
     print(f"wrote {path}")
@@ -142,11 +143,16 @@ def enclosed_volume(points: np.ndarray, triangles: np.ndarray) -> float:
     return abs(float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
 
 
-def run_head(mesh_file, steps: int | None = None) -> dict:
-    """The example scene on a head mesh: the diameters and the enclosed volume before and after."""
+def run_head(mesh_file, steps: int | None = None, scene=SCENE) -> dict:
+    """The example scene (a checkout's examples/birth/fetal_head.toml, or scene) on a head mesh: the
+    diameters and the enclosed volume before and after."""
+    from ..runtime.base.errors import TensormassError
     from ..runtime.run.simulation import Simulation
     from ..runtime.scene.scene import Scene
-    text = SCENE.read_text(encoding="utf-8").replace('file = "fetal_head.msh"', f'file = "{Path(mesh_file).as_posix()}"')
+    if not Path(scene).is_file():
+        raise TensormassError(f"the fetal head's scene {scene} is not there: run from a checkout, or give the "
+                              "scene file (examples/birth/fetal_head.toml)")
+    text = Path(scene).read_text(encoding="utf-8").replace('file = "fetal_head.msh"', f'file = "{Path(mesh_file).as_posix()}"')
     if steps is not None:
         text = text.replace("steps = 40", f"steps = {steps}")
     text = text.replace('[output]\ndir = "out/fetal_head"\n', "")
@@ -164,14 +170,14 @@ def run_head(mesh_file, steps: int | None = None) -> dict:
             "volume_change": (v1 - v0) / v0, "seconds": summary.time["total"]}
 
 
-def report(sizes=(0.0047, SIZE, 0.0023), json_path=None, progress=print) -> list:
+def report(sizes=(0.0047, SIZE, 0.0023), json_path=None, progress=print, scene=SCENE) -> list:
     """The head at each mesh size (made with gmsh): Table 8.2's diameters and their changes."""
     import tempfile
     rows = []
     with tempfile.TemporaryDirectory(prefix="tensormass-head-") as folder:
         for size in sizes:
             path = make(Path(folder) / f"head_{1e3 * size:g}mm.msh", size)
-            row = {"size_mm": 1e3 * size, **run_head(path)}
+            row = {"size_mm": 1e3 * size, **run_head(path, scene=scene)}
             rows.append(row)
             changes = ", ".join(f"{k} {row['diameters_mm'][k][0]:.2f} -> {row['diameters_mm'][k][1]:.2f} mm "
                                 f"({row['change_mm'][k]:+.3f}; thesis {TABLE_8_2[k][1]:+.2f})" for k in DIAMETERS)

@@ -13,6 +13,7 @@ from tensormass.apps import fetal_head
 from tensormass.runtime.base.errors import SceneError, TensormassError
 
 MESH = Path(__file__).resolve().parents[2] / "examples" / "birth" / "fetal_head.msh"
+SCENE = MESH.with_suffix(".toml")          # the checkout's (an installed package has no examples)
 
 
 def test_zones_cover_the_head_and_sutures_cross_the_bands():
@@ -31,13 +32,18 @@ def test_zones_cover_the_head_and_sutures_cross_the_bands():
 
 
 def test_pressure_bands_shorten_sobd_and_lengthen_mavd_at_constant_volume():
-    row = fetal_head.run_head(MESH, steps=3)
+    row = fetal_head.run_head(MESH, steps=3, scene=SCENE)
     assert row["status"] == "ok" and row["triangles"] == 9334
     assert row["change_mm"]["MaVD"] > 0.01 and row["change_mm"]["SOBD"] < -0.01
     assert abs(row["volume_change"]) < 1e-9
 
 
+def test_without_the_scene_file_the_report_says_so(tmp_path):
+    with pytest.raises(TensormassError, match="scene .* is not there"):
+        fetal_head.run_head(MESH, steps=1, scene=tmp_path / "none.toml")
+
+
 def test_a_region_the_shell_mesh_lacks_is_refused():
-    text = fetal_head.SCENE.read_text().replace('file = "fetal_head.msh"', f'file = "{MESH.as_posix()}"')
+    text = SCENE.read_text().replace('file = "fetal_head.msh"', f'file = "{MESH.as_posix()}"')
     with pytest.raises((SceneError, TensormassError), match=r"unknown region 'band50'; the mesh's regions: 'suture' \(id 1, surface\), 'band45'.*'neck' \(id 6, surface\)$"):
         tm.Simulation(tm.Scene.from_string(text.replace('region = "band45"', 'region = "band50"')), output=False)
