@@ -167,6 +167,8 @@ class DevicePCG:
                 graph = stream.end_capture()
             self._graph = (key, graph, stream)
         _, graph, stream = self._graph
+        # the graph's stream does not wait for the default stream, which wrote x, r, z, p and s
+        cp.cuda.Stream.null.synchronize()
         graph.launch(stream=stream)
         stream.synchronize()
 
