@@ -119,6 +119,9 @@ class DevicePCG:
 
     pcg = DevicePCG(device, pattern.indptr, pattern.indices, n)
     x, iterations = pcg.solve(data, b, diagonal, tolerance, max_iterations, x0)   # |A x - b| <= tol |b|
+
+    The residual is checked between blocks only: a solve takes a multiple of check_every iterations,
+    up to check_every - 1 past max_iterations, and stops on the recurrence's residual (as scipy's CG).
     """
 
     def __init__(self, device: Device, indptr, indices, n: int, check_every: int = 8):
