@@ -20,7 +20,8 @@ _ERRORS = ("TensormassError", "ElementError", "InvertedElementError", "Degenerat
 # name -> the runtime module that defines it (imported on first use)
 _LAZY = {"load_kernel": "kernels.kernels", "Kernel": "kernels.kernels", "Scene": "scene.scene",
          "Simulation": "run.simulation", "Summary": "run.simulation", "FIELDS": "physics.fields",
-         "write_picture": "run.picture", "plot_history": "run.curves", **{name: "base.errors" for name in _ERRORS}}
+         "write_picture": "run.picture", "plot_history": "run.curves", "Live": "run.live",
+         "LiveProcess": "run.live_process", **{name: "base.errors" for name in _ERRORS}}
 __all__ = ["__version__", *_LAZY]
 
 

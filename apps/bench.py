@@ -49,6 +49,7 @@ from .bench_contact import add_contact_command
 from .bench_batch import add_batch_command
 from .bench_steps import add_steps_command
 from .bench_gpu import add_gpu_command
+from .bench_view import add_view_bench_command
 from .classic import LAWS, load_classic
 from .machine import format_machine, machine_info
 
@@ -528,6 +529,7 @@ def add_bench_command(subparsers) -> argparse.ArgumentParser:
 
     add_steps_command(sub)
     add_gpu_command(sub)
+    add_view_bench_command(sub)
     add_integrators_command(sub)
     add_assembly_command(sub)
     add_organ_command(sub)

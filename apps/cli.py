@@ -56,6 +56,8 @@ DEFERRED = {
                "accuracy against run time; stability on stiff and extreme cases"),
     "plot": (".plot", "add_plot_command", "draw the per-step history of a run summary (JSON) as a PNG"),
     "mesh": (".mesh_tools", "add_mesh_command", "mesh tools: simplify a surface (precision alpha), regenerate a volume"),
+    "view": (".view", "add_view_command", "watch a scene run live in a browser and pull it with the mouse "
+                                          "(needs tensormass[view])"),
 }
 
 
@@ -237,7 +239,7 @@ def build_parser(full=None) -> argparse.ArgumentParser:
     # the order of `tensormass --help`: generate, run, demo, batch, bench, report, plot
     _add_deferred(sub, "generate", full)
     add_commands(sub)                      # run, demo
-    for name in ("batch", "bench", "report", "plot", "mesh"):
+    for name in ("batch", "bench", "report", "plot", "mesh", "view"):
         _add_deferred(sub, name, full)     # batch: dask; bench: kernels, compile, steps, ...; report; plot; mesh
     return parser
 

@@ -263,6 +263,9 @@ class ImplicitEuler(_Dynamic):
         contact, extra = self.model.contact, None
         if contact is not None:             # penalty contact, linearised like the elastic forces
             f, extra = self._contact_terms(contact, u, t, h, f)
+        if ctx.grab is not None:            # a viewer's grab (runtime.physics.grab): its constant Hessian
+            f = f + ctx.grab.forces(u)
+            extra = h * h * ctx.grab.hessian() if extra is None else extra + h * h * ctx.grab.hessian()
         dv_c = self.boundary_velocity(u, t, h) - v[self.model.fixed_dofs]
         if stale is not None:               # a refresh (budgeted step): what the interval it ends cost
             self._refresh(u, K, stale, h)
@@ -406,6 +409,8 @@ class Explicit(_Dynamic):
             contact.begin_step(u, t / self.duration, (t + h) / self.duration, h)
             contact.set_pose(t / self.duration)
             f -= contact.gradient(u)
+        if ctx.grab is not None:            # a viewer's grab (runtime.physics.grab)
+            f += ctx.grab.forces(u)
         if self.beta:
             f -= self.beta * stiffness_times(ctx.asm, u, v, f_int, self.model.size)
         v1 = v.copy()

@@ -73,6 +73,8 @@ class Context:
         # formulation "mixed": the pressure unknowns, solved with the displacements (runtime.physics.saddle)
         mixed = [c for c in getattr(model, "couplings", []) if c.formulation == "mixed"]
         self.pressures = Pressures(model, mixed) if mixed else None
+        # a viewer's spring on a material point (runtime.physics.grab), set and dropped between steps
+        self.grab = None
         self._cell_size = None
 
     def warm_up_solver(self) -> None:

@@ -309,6 +309,9 @@ class Simulation:
         before the first step (bad input) are plain TensormassErrors. The files the
         scene asks for are written in both cases (sim.data: the summary as written).
         """
+        if self.ctx is not None:
+            raise TensormassError("Simulation.run: this Simulation was started by hand (start/advance); "
+                                  "call finish() for its summary, or run a new Simulation")
         if self.files is None:
             try:
                 summary = self._run()
@@ -355,19 +358,10 @@ class Simulation:
                 status, message = self.monitor.verdict()
                 if status == "invalid":
                     stopped = RunStopped, status, message + self._explicit_cause()
-            except _WriterFailed as failure:              # disk full, permissions: the environment, not the run
-                raise failure.error from None
-            except _CallbackFailed as failure:            # the caller's on_step raised: theirs, as it was
-                raise failure.error from None
-            except _Stop as stop:
-                stopped = RunStopped, "diverged", stop.message
-            except _Invalid as invalid:
-                stopped = RunStopped, "invalid", invalid.message
-            except KeyboardInterrupt:
-                stopped = RunInterrupted, "interrupted", f"interrupted (Ctrl-C) after step {self._step}"
-            except (ValueError, ArithmeticError) as exc:          # TensormassError, a failed step, LinAlgError
-                # an inverted element in an explicit run: most often dt above the stable step, said here
-                stopped = RunStopped, "failed", f"step {self._step + 1} failed: {exc}{self._explicit_cause()}"
+            except (_WriterFailed, _CallbackFailed) as failure:
+                raise failure.error from None    # the environment's (disk full) or the caller's on_step: as it was
+            except (_Stop, _Invalid, KeyboardInterrupt, ValueError, ArithmeticError) as exc:
+                stopped = self._stopped_by(exc)
             if stopped is not None:
                 _, status, message = stopped
                 if self.writer is not None and hasattr(self.writer, "mark_stopped"):
@@ -382,59 +376,157 @@ class Simulation:
             raise error
         return self.summary
 
+    def _stopped_by(self, exc) -> tuple:
+        """(RunStopped or RunInterrupted, status, message) of what stopped the step after self._step."""
+        if isinstance(exc, _Stop):
+            return RunStopped, "diverged", exc.message
+        if isinstance(exc, _Invalid):
+            return RunStopped, "invalid", exc.message
+        if isinstance(exc, KeyboardInterrupt):
+            return RunInterrupted, "interrupted", f"interrupted (Ctrl-C) after step {self._step}"
+        # a TensormassError, a failed step, a LinAlgError; an inverted element in an explicit run: most
+        # often dt above the stable step, said here
+        return RunStopped, "failed", f"step {self._step + 1} failed: {exc}{self._explicit_cause()}"
+
+    # -- stepping by hand: a viewer, a haptic loop, a notebook ------------------------------------------
+    def start(self) -> None:
+        """Prepare for stepping by hand (advance): the model's kernels, the assembly pattern, the
+        initial state and step 0's frame. run() does this itself; a Simulation is either run() or
+        stepped with start() and advance(), not both."""
+        if self.ctx is not None:
+            raise TensormassError("Simulation.start: already started (a Simulation starts once; make a new one)")
+        begun = time.perf_counter()
+        self._step, self._history = 0, _History()
+        self._released_work = 0.0
+        self._prepare()
+        self._setup += time.perf_counter() - begun
+        self._begin()
+
+    def advance(self, steps: int = 1) -> dict:
+        """Take `steps` more steps (after start()) and give the last one's history row (step, time, newton,
+        linear, wall, energies). Open-ended: past solver.steps the loads, amplitudes and prescribed
+        motions hold their end values. A step the health monitor stops, or that fails, raises RunStopped
+        (its .summary up to the last finished step); the state stays the last good one."""
+        if self.ctx is None:
+            raise TensormassError("Simulation.advance: call start() first")
+        if not getattr(self, "_stepping", True):
+            raise TensormassError(f"Simulation.advance: the run stopped at step {self._step}: {self._why}")
+        for _ in range(int(steps)):
+            try:
+                self._advance_step(self._step + 1)
+            except (_WriterFailed, _CallbackFailed) as failure:
+                raise failure.error from None
+            except (_Stop, _Invalid, KeyboardInterrupt, ValueError, ArithmeticError) as exc:
+                kind, status, message = self._stopped_by(exc)
+                self._stepping, self._why = False, message
+                summary = self._summarise(self._setup, status, message)
+                raise (kind(message, summary) if kind is RunInterrupted else kind(message, summary, status)) from None
+        return dict(self._history.last)
+
+    def finish(self) -> Summary:
+        """The Summary of the steps taken by hand (the writer closed); status from the health monitor."""
+        if self.ctx is None:
+            raise TensormassError("Simulation.finish: nothing was stepped (call start() and advance())")
+        if self.writer is not None:
+            self.writer.close()
+        status, message = self.monitor.verdict()
+        self.summary = self._summarise(self._setup, status, message)
+        return self.summary
+
+    def grab(self, point, target=None, stiffness: float | None = None):
+        """Hold the body at `point` (where it is now, on or in the body) with a spring to `target` (None:
+        the point itself), stiffness k [N/m] (None: about the body's own there, runtime.physics.grab).
+        The spring acts from the next step on, until release(); move it with drag(target). implicit_euler
+        and explicit runs take it. Returns the Grab (grab.force(u): its pull)."""
+        from ..physics.grab import GRAB_KINDS, Grab
+        if self.ctx is None:
+            raise TensormassError("Simulation.grab: call start() first")
+        kind = self.model.solver.kind
+        if kind not in GRAB_KINDS or getattr(self.model.solver, "device", "cpu") != "cpu":
+            raise TensormassError(f"Simulation.grab: solver.kind = {kind!r} on device "
+                                  f"{getattr(self.model.solver, 'device', 'cpu')!r} takes no grab; "
+                                  f"{' and '.join(GRAB_KINDS)} on the cpu do")
+        self.release()
+        self.ctx.grab = Grab.at(self.ctx.asm, self.ctx.u, point, target, stiffness)
+        return self.ctx.grab
+
+    def drag(self, target) -> None:
+        """Move the grab's target (takes effect at the next step)."""
+        if self.ctx is None or self.ctx.grab is None:
+            raise TensormassError("Simulation.drag: nothing is grabbed (grab(point) first)")
+        self.ctx.grab.target = target
+
+    def release(self) -> None:
+        """Let go of the grab (its work so far stays in the energy balance); nothing grabbed: no-op."""
+        if self.ctx is not None and self.ctx.grab is not None:
+            self._released_work = getattr(self, "_released_work", 0.0) + self.ctx.grab.work
+            self.ctx.grab = None
+
     def _loop(self) -> None:
-        integ, model = self.integrator, self.model
+        self._begin()
+        for k in range(1, self.integrator.n_steps + 1):
+            self._advance_step(k)
+
+    def _begin(self) -> None:
+        """Step 0: the initial energies, the health monitor's start and the first frame."""
         energies = self._energies(0)
         self._write(0, self.monitor.start(self.ctx, energies).flag)
-        for k in range(1, integ.n_steps + 1):
-            t0 = time.perf_counter()
-            linear = self.ctx.linear_iterations
-            info = integ.step(k)
-            if k == integ.n_steps:
-                self._check_budget(k, info["time"])
-            if model.volume_constraint is not None:
-                self._preserve_volume(model)
-            if self.adapter is not None:
-                self._adapt(k)
-                integ, model = self.integrator, self.model      # refinement rebuilds both
-                self.monitor.model = model
-            if self.topology is not None and self.topology.due(k):
-                self._change_topology(k)
-                integ, model = self.integrator, self.model
-                self.monitor.model = model
-            wall = time.perf_counter() - t0
-            frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
-            keep = self._history.keeps(k)
-            # the contact's record first: it adds the obstacles' work of the step to the balance
-            contact_row = None if model.contact is None else self._contact(model.contact, k, info["time"])
-            if getattr(integ, "budget", None) is not None:      # the budgeted step: the frames written
-                energies = self._energies(k, k == integ.n_steps or (frame and self.writer is not None))
-            else:
-                energies = self._energies(k, frame or keep)
-            if model.contact is not None and self.monitor.energy_scale is not None:
-                # the obstacles' work so far scales the balance too (runtime.contact.base.add_work)
-                self.monitor.energy_scale = max(self.monitor.energy_scale, getattr(model.contact, "work_scale", 0.0))
-            check = self.monitor.check(self.ctx, k, energies)
-            if check.stop:
-                raise _Stop(check.stop + self._hint(k))
-            self._step = k
-            row = {"step": k, "time": info["time"], "newton": info["newton"],
-                   "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
-            if model.contact is not None:
-                row["contact"] = contact_row
-            if keep:             # probes and reactions only for the rows the history keeps
-                row["probes"] = model.probe_values(self.ctx.u)
-                row["reactions"] = _as_lists(self.reactions(), ("force", "moment"))
-            self._history.add(row)
-            if frame:
-                self._write(k, check.flag)
-            if self.progress is not None:
-                self.progress(k, integ.n_steps)
-            if self.on_step is not None:
-                try:
-                    self.on_step(self)
-                except Exception as exc:
-                    raise _CallbackFailed(exc) from exc
+
+    def _advance_step(self, k: int) -> None:
+        """Step k: the integrator's step, then what follows it (volume, adapt, cuts, contact record,
+        energies, health check, history, frame, callbacks)."""
+        integ, model = self.integrator, self.model
+        t0 = time.perf_counter()
+        linear = self.ctx.linear_iterations
+        grab, u_before = self.ctx.grab, self.ctx.u
+        info = integ.step(k)
+        if grab is not None:
+            grab.add_work(u_before, self.ctx.u)
+        if k == integ.n_steps:
+            self._check_budget(k, info["time"])
+        if model.volume_constraint is not None:
+            self._preserve_volume(model)
+        if self.adapter is not None:
+            self._adapt(k)
+            integ, model = self.integrator, self.model      # refinement rebuilds both
+            self.monitor.model = model
+        if self.topology is not None and self.topology.due(k):
+            self._change_topology(k)
+            integ, model = self.integrator, self.model
+            self.monitor.model = model
+        wall = time.perf_counter() - t0
+        frame = k % max(model.output.every, 1) == 0 or k == integ.n_steps
+        keep = self._history.keeps(k)
+        # the contact's record first: it adds the obstacles' work of the step to the balance
+        contact_row = None if model.contact is None else self._contact(model.contact, k, info["time"])
+        if getattr(integ, "budget", None) is not None:      # the budgeted step: the frames written
+            energies = self._energies(k, k == integ.n_steps or (frame and self.writer is not None))
+        else:
+            energies = self._energies(k, frame or keep)
+        if model.contact is not None and self.monitor.energy_scale is not None:
+            # the obstacles' work so far scales the balance too (runtime.contact.base.add_work)
+            self.monitor.energy_scale = max(self.monitor.energy_scale, getattr(model.contact, "work_scale", 0.0))
+        check = self.monitor.check(self.ctx, k, energies)
+        if check.stop:
+            raise _Stop(check.stop + self._hint(k))
+        self._step = k
+        row = {"step": k, "time": info["time"], "newton": info["newton"],
+               "linear": self.ctx.linear_iterations - linear, "wall": wall, **energies}
+        if model.contact is not None:
+            row["contact"] = contact_row
+        if keep:             # probes and reactions only for the rows the history keeps
+            row["probes"] = model.probe_values(self.ctx.u)
+            row["reactions"] = _as_lists(self.reactions(), ("force", "moment"))
+        self._history.add(row)
+        if frame:
+            self._write(k, check.flag)
+        if self.progress is not None:
+            self.progress(k, integ.n_steps)
+        if self.on_step is not None:
+            try:
+                self.on_step(self)
+            except Exception as exc:
+                raise _CallbackFailed(exc) from exc
 
     def _contact(self, contact, k: int, t: float) -> dict:
         """The step's contact record (runtime.contact); IPC: the intersection test every check_every steps
@@ -584,6 +676,8 @@ class Simulation:
         contact = getattr(model, "contact", None)
         if contact is not None:              # moving obstacles' work on the body (runtime.contact)
             work += getattr(contact, "work", 0.0)
+        # a grab's spring (runtime.physics.grab): the work of the released ones and of the one held
+        work += getattr(self, "_released_work", 0.0) + (0.0 if ctx.grab is None else ctx.grab.work)
         return {"elastic": elastic, "kinetic": kinetic, "external_work": work}
 
     def _pressure_work(self, model, u) -> float:
