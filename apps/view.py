@@ -10,7 +10,8 @@ needs no GPU or VTK on the laptop, and a deforming mesh costs the same bandwidth
 Mouse events go back to the server's VTK interactor: a left drag turns the camera; a left drag with
 shift held, or any left drag while "grab" is on, picks the body point under the cursor and pulls it
 with a spring (runtime.physics.grab) toward the point under the cursor in the plane facing the
-camera, until the button is released.
+camera, until the button is released. A left drag with ctrl held (or "tool" on) on an obstacle moves
+it in that plane (penalty contact: runtime.run.live.Live.move_obstacle).
 
 The steps run in the Live's own thread (runtime.run.live); the page refreshes at most `fps` times
 a second from the latest Snapshot and skips the steps in between, so drawing never holds up a step.
@@ -125,10 +126,11 @@ class Picture:
         for name in getattr(self, "_obstacle_names", []):
             self.plotter.remove_actor(name)
         self._obstacle_meshes, self._obstacle_names = [], []
+        self.obstacle_actors = {}
         for name, V, F in obstacles:
             mesh = self.pv.PolyData(np.asarray(V, float), np.column_stack([np.full(len(F), 3), F]).ravel())
             key = f"obstacle {name}"
-            self.plotter.add_mesh(mesh, color=(0.6, 0.6, 0.7), opacity=0.5, name=key, pickable=False)
+            self.obstacle_actors[name] = self.plotter.add_mesh(mesh, color=(0.6, 0.6, 0.7), opacity=0.5, name=key)
             self._obstacle_meshes.append(mesh)
             self._obstacle_names.append(key)
 
@@ -197,16 +199,28 @@ class Picture:
         return np.asarray(self.plotter.screenshot(return_img=True))
 
     # -- the mouse ---------------------------------------------------------------------------------------
-    def pick(self, x: float, y: float):
-        """The body point under display pixel (x, y) (origin bottom left), or None."""
+    def pick(self, x: float, y: float, actors=None):
+        """The point of the body (or of one of `actors`) under display pixel (x, y) (origin bottom
+        left), and the actor picked; (None, None) when there is none."""
         import vtk
         picker = vtk.vtkCellPicker()
         picker.SetTolerance(1e-4)
         picker.PickFromListOn()
-        picker.AddPickList(self.body_actor)
+        for actor in actors if actors is not None else [self.body_actor]:
+            picker.AddPickList(actor)
         if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
-            return None
-        return np.asarray(picker.GetPickPosition(), dtype=float)
+            return None, None
+        return np.asarray(picker.GetPickPosition(), dtype=float), picker.GetActor()
+
+    def obstacle_at(self, x: float, y: float):
+        """(name, point) of the obstacle under display pixel (x, y), or (None, None)."""
+        if not self.obstacle_actors:
+            return None, None
+        point, actor = self.pick(x, y, list(self.obstacle_actors.values()))
+        for name, candidate in self.obstacle_actors.items():
+            if actor is not None and candidate.GetAddressAsString("vtkActor") == actor.GetAddressAsString("vtkActor"):
+                return name, point
+        return None, None
 
     def depth_of(self, point) -> float:
         ren = self.plotter.renderer
@@ -253,7 +267,9 @@ class Viewer:
         self.frames = 0                      # pictures drawn
         self._frame_times = []
         self._grabbing = None                # display depth of the grabbed point while the mouse holds it
-        self.grab_mode = False
+        self._tool = None                    # (obstacle, its shift at the press, point picked, depth) while held
+        self._shifts = {}                    # obstacle -> the shift the mouse last gave it
+        self.grab_mode = self.tool_mode = False
         self.server = None
         self.url = None
         self._thread = None
@@ -304,28 +320,42 @@ class Viewer:
     def _on_press(self, style, _event) -> None:
         iren = style.GetInteractor()
         x, y = iren.GetEventPosition()
-        if self._grabbing is not None:       # a release the page did not deliver: this press lets go first
+        if self._grabbing is not None or self._tool is not None:   # a release the page did not deliver
             self.release()
-        if self.grab_mode or iren.GetShiftKey():
-            if self.press(x, y):
-                return
+        if (self.tool_mode or iren.GetControlKey()) and self.press_tool(x, y):
+            return
+        if (self.grab_mode or iren.GetShiftKey()) and self.press(x, y):
+            return
         style.OnLeftButtonDown()
 
     def _on_move(self, style, _event) -> None:
-        if self._grabbing is not None:
+        if self._grabbing is not None or self._tool is not None:
             self.move(*style.GetInteractor().GetEventPosition())
             return
         style.OnMouseMove()
 
     def _on_release(self, style, _event) -> None:
-        if self._grabbing is not None:
+        if self._grabbing is not None or self._tool is not None:
             self.release()
             return
         style.OnLeftButtonUp()
 
+    def press_tool(self, x: float, y: float) -> bool:
+        """Take hold of the obstacle under display pixel (x, y); False: none there (or not movable)."""
+        name, point = self.picture.obstacle_at(x, y)
+        if name is None:
+            return False
+        start = self._shifts.get(name, np.zeros(3))
+        try:
+            self.live.move_obstacle(name, start)
+        except TensormassError:
+            return False                     # IPC contact: its obstacles move by their motion only
+        self._tool = (name, start, point, self.picture.depth_of(point))
+        return True
+
     def press(self, x: float, y: float) -> bool:
         """Grab the body under display pixel (x, y) (origin bottom left); False: nothing there."""
-        point = self.picture.pick(x, y)
+        point, _ = self.picture.pick(x, y)
         if point is None:
             return False
         try:
@@ -336,15 +366,25 @@ class Viewer:
         return True
 
     def move(self, x: float, y: float) -> None:
-        """Drag the grab to display pixel (x, y) in the plane facing the camera through the grabbed point."""
+        """Drag the grab (or the tool held) to display pixel (x, y), in the plane facing the camera
+        through the point picked."""
+        if self._tool is not None:
+            name, start, point, depth = self._tool
+            shift = start + self.picture.at_depth(x, y, depth) - point
+            self._shifts[name] = shift
+            self.live.move_obstacle(name, shift)
+            return
         if self._grabbing is None:
             return
         target = self.picture.at_depth(x, y, self._grabbing)
         self.live.drag(target[:self.picture.body["dim"]])
 
     def release(self) -> None:
-        self._grabbing = None
-        self.live.release()
+        """Let go: of the grab (the body springs back), or of the tool (it stays where it is)."""
+        self._tool = None
+        if self._grabbing is not None or self.live.snapshot().grab is not None:
+            self._grabbing = None
+            self.live.release()
 
     # -- the page ----------------------------------------------------------------------------------------------
     def serve(self, port: int = 8080, host: str = "127.0.0.1", *, block: bool = False):
@@ -393,7 +433,7 @@ class Viewer:
         state.trame__title = f"tensormass view: {name}"
         state.field = self.picture.field
         state.fields = self.picture.fields
-        state.grab_mode = False
+        state.grab_mode = state.tool_mode = False
         state.status_text = ""
         state.curves = ""
         state.playing = False
@@ -405,9 +445,9 @@ class Viewer:
                 self.draw(force=True)
                 ctrl.view_update()
 
-        @state.change("grab_mode")
-        def _grab_mode(grab_mode, **_):
-            self.grab_mode = bool(grab_mode)
+        @state.change("grab_mode", "tool_mode")
+        def _modes(grab_mode, tool_mode, **_):
+            self.grab_mode, self.tool_mode = bool(grab_mode), bool(tool_mode)
 
         def play():
             self.live.play(self.speed)
@@ -428,6 +468,7 @@ class Viewer:
 
         def reset():
             self.live.reset()
+            self._shifts = {}
             state.playing = False
             self.picture.reset_range()
             self._refresh()
@@ -443,6 +484,9 @@ class Viewer:
                 v3.VBtn("Release", click=self.release, id="release")
                 v3.VSwitch(v_model=("grab_mode",), label="grab", id="grab", hide_details=True, density="compact",
                            color="red", style="max-width: 110px; margin-left: 12px")
+                if self.picture.obstacle_actors:
+                    v3.VSwitch(v_model=("tool_mode",), label="tool", id="tool", hide_details=True,
+                               density="compact", color="blue", style="max-width: 110px")
                 v3.VSelect(v_model=("field",), items=("fields",), id="field", hide_details=True, density="compact",
                            style="max-width: 220px; margin-left: 12px")
             with layout.content:
@@ -465,10 +509,14 @@ class Viewer:
         if snap.grab is not None:
             f = snap.grab["force"]
             lines.append(f"grab      {np.linalg.norm(f):.3g} N  (k = {snap.grab['stiffness']:.3g} N/m)")
+        for name, force in snap.tools.items():
+            lines.append(f"{name:<9} {np.linalg.norm(force):.3g} N on it")
         for name, value in snap.probes.items():
             lines.append(f"{name:<9} [{', '.join(f'{v * 1e3:+.3f}' for v in value)}] mm")
         lines.append("")
         lines.append("shift + left drag (or grab on): pull the body")
+        if self.picture.obstacle_actors:
+            lines.append("ctrl + left drag (or tool on): move a tool")
         return "\n".join(lines)
 
     def _refresh(self) -> None:

@@ -15,7 +15,7 @@ of the analytic shapes.
 
 An obstacle moves like a [[fixed]] entry's rigid motion (runtime.physics.motion): the point X of
 the obstacle at rest is at R(a angle)(X - p) + p + a t at amplitude value a (default: the ramp
-a = s over the run).
+a = s over the run), plus its `shift`, a translation a viewer's mouse sets between steps.
 """
 from __future__ import annotations
 
@@ -49,6 +49,9 @@ class Obstacle:
     translation: tuple | None = None      # rigid motion, as for [[fixed]]
     rotation: Rotation | None = None
     amplitude: str | None = None
+    # a translation on top of the motion, set between steps by a viewer's mouse (runtime.run.live:
+    # penalty contact only, whose obstacles may jump between steps); None: none
+    shift: tuple | None = None
 
     # -- motion ------------------------------------------------------------------------------------
     @property
@@ -58,9 +61,8 @@ class Obstacle:
     def placed(self, X: np.ndarray, a: float) -> np.ndarray:
         """Points X of the obstacle at rest, where its motion has them at amplitude value a."""
         X = np.asarray(X, dtype=float)
-        if not self.moves or a == 0.0:
-            return X.copy()
-        return X + rigid_displacement(X, a, self.rotation, self.translation)
+        Y = X.copy() if not self.moves or a == 0.0 else X + rigid_displacement(X, a, self.rotation, self.translation)
+        return Y if self.shift is None else Y + np.asarray(self.shift, dtype=float)
 
     def centre(self, a: float, rest=None) -> np.ndarray:
         """The point moments about the obstacle are taken about, placed at amplitude value a: a plane's
@@ -86,6 +88,8 @@ class Obstacle:
             c = p - R @ p
         if self.translation is not None:
             c = c + a * np.asarray(self.translation, dtype=float)
+        if self.shift is not None:
+            c = c + np.asarray(self.shift, dtype=float)
         return R, c
 
     # -- surfaces (IPC) ----------------------------------------------------------------------------

@@ -116,13 +116,14 @@ class PenaltyContact(ContactBase):
         _, per = self._vertex_gradient(u, terms)
         x = self.body_points(u)
         obstacles, pairs, depth = {}, 0, 0.0
-        last = getattr(self, "_last_pose", None)
-        for o, (hit, g, _, _), f in zip(self.obstacles, terms, per):
-            if last is not None and o.moves and hit.size:
+        last, frames = getattr(self, "_last_frames", None), []
+        for k, (o, (hit, g, _, _), f) in enumerate(zip(self.obstacles, terms, per)):
+            R1, c1 = o.frame(self.amplitude(o, self.s))          # the motion's and a viewer's shift
+            frames.append((R1, c1))
+            R0, c0 = (R1, c1) if last is None else last[k]
+            if hit.size and not (np.array_equal(R0, R1) and np.array_equal(c0, c1)):
                 # work on the body: the force at each vertex inside times the move over the step of the
                 # obstacle's point under it (the rigid motion from the last pose to this one)
-                R0, c0 = o.frame(self.amplitude(o, last))
-                R1, c1 = o.frame(self.amplitude(o, self.s))
                 X = (x[hit] - c1) @ R1                  # the obstacle's rest frame
                 self.add_work(float(np.sum(-f * (x[hit] - (X @ R0.T + c0)))))
             on = f                                      # dE/dx on the body = the force on the obstacle
@@ -131,6 +132,6 @@ class PenaltyContact(ContactBase):
                                  "moment": np.cross(x[hit] - c, on).sum(axis=0).tolist()}
             pairs += hit.size
             depth = max(depth, float(g.max()) if g.size else 0.0)
-        self._last_pose = self.s
+        self._last_frames = frames
         return {"pairs": int(pairs), "min_distance": None, "ccd_fraction": None, "penetration": depth,
                 "obstacles": obstacles, "stiffness": self.k}

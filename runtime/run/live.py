@@ -4,6 +4,7 @@
     live.step(10)                   # ten steps in the caller's thread
     live.play(); live.pause()       # steps in a thread of its own until paused (play(speed=1): real time)
     live.grab(point); live.drag(target); live.release()     # a spring pulls the body (runtime.physics.grab)
+    live.move_obstacle("tool", shift)                       # a tool moved by the mouse (penalty contact)
     snap = live.snapshot()          # the state after the last step: an immutable copy, read from any thread
     live.reset()                    # the scene again from step 0
     live.close()
@@ -37,6 +38,10 @@ __all__ = ["Live", "Snapshot", "CURVE_POINTS", "drawable_fields", "describe_body
 CURVE_POINTS = 2000
 # The step rate a Snapshot reports is the mean over this many of the last steps' wall times.
 RATE_WINDOW = 20
+# A tool the mouse moves (move_obstacle) goes at most this share of the body's size per step (on the
+# organ of examples/organ/live_tool.toml 0.1 mm a step, 1 cm/s): a penalty contact pushed by larger
+# jumps rings, the body bouncing off the tool at the jumps' pace.
+TOOL_REACH = 0.001
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,7 @@ class Snapshot:
     version: int = 0                     # counts the models (reset, cut, refinement): body() changes with it
     values: tuple | None = None          # snapshot(field): (values per point or cell, "point" | "cell")
     obstacles: tuple = ()                # snapshot(field): each obstacle's vertices where it is now
+    tools: dict = field(default_factory=dict)      # obstacle name -> the body's force on it [N] (contact)
 
     @property
     def steps_per_second(self) -> float:
@@ -85,14 +91,17 @@ class Live:
 
     # -- state --------------------------------------------------------------------------------------------
     def _new(self) -> None:
+        for obstacle in getattr(self.scene, "obstacles", None) or []:
+            obstacle.shift = None            # the scene's obstacles: where their motion has them again
         sim = Simulation(self.scene, output=False)
-        sim.start()
         self.sim = sim
+        sim.start()
         self._stopped = None
         self._evaluator = None
         self._walls = deque(maxlen=RATE_WINDOW)
         self._curves = {}
         self._mouse = None
+        self._tools = {}                     # obstacle name -> the shift the mouse wants
         self._record()
         self._publish()
 
@@ -129,10 +138,12 @@ class Live:
             g = {"point": grab.position(u), "target": grab.target.copy(), "force": grab.force(u),
                  "stiffness": grab.stiffness}
         status = "stopped" if self._stopped else ("playing" if self.playing else "paused")
+        contact = (sim._history.last.get("contact") if sim.step else None) or {}
+        tools = {name: np.asarray(o["force"], dtype=float) for name, o in (contact.get("obstacles") or {}).items()}
         self._snapshot = Snapshot(
             step=sim.step, time=sim.time, displacement=sim.displacement, dofs=sim.dofs, probes=sim.probes(),
             status=status, message=self._stopped, step_wall=float(np.mean(self._walls)) if self._walls else 0.0,
-            grab=g, model=sim.model,
+            grab=g, model=sim.model, tools=tools,
             version=self._model_changes(sim.model))
 
     def _model_changes(self, model) -> int:
@@ -170,6 +181,7 @@ class Live:
         if self._stopped:
             raise TensormassError(f"live: stopped at step {self.sim.step}: {self._stopped}; reset() starts again")
         self._follow_mouse()
+        self._follow_tools()
         start = time.perf_counter()
         try:
             self.sim.advance(1)
@@ -278,6 +290,36 @@ class Live:
             self.sim.release()
             self._mouse = None
             self._publish()
+
+    def move_obstacle(self, name: str, shift) -> None:
+        """Where the mouse wants the obstacle `name`: `shift` [m] from where its motion has it. It walks
+        there by at most TOOL_REACH of the body's size per step (penalty contact: Simulation.move_obstacle)."""
+        d = np.asarray(shift, dtype=float).reshape(-1)
+        with self._lock:
+            self.sim.move_obstacle(name, self._shift_of(name))        # the name and the method checked, no move
+            if d.size != 3 or not np.all(np.isfinite(d)):
+                raise TensormassError(f"live: obstacle shift must be 3 finite numbers, got {list(d)}")
+            self._tools[name] = d
+
+    def _shift_of(self, name) -> np.ndarray:
+        for obstacle in self._obstacles():
+            if obstacle.name == name and obstacle.shift is not None:
+                return np.asarray(obstacle.shift, dtype=float)
+        return np.zeros(3)
+
+    def _obstacles(self) -> list:
+        return list(getattr(getattr(self.sim.model, "contact", None), "obstacles", None) or [])
+
+    def _follow_tools(self) -> None:
+        """Move each obstacle the mouse holds toward where it wants it, by at most TOOL_REACH x the body's size."""
+        if not self._tools:
+            return
+        reach = TOOL_REACH * float(np.linalg.norm(np.ptp(self.sim.model.mesh.points, axis=0)))
+        for name, wanted in self._tools.items():
+            now = self._shift_of(name)
+            d = wanted - now
+            distance = float(np.linalg.norm(d))
+            self.sim.move_obstacle(name, now + (d if distance <= reach else d * (reach / distance)))
 
 
 # ============================================================================== what a viewer draws

@@ -94,6 +94,9 @@ class LiveProcess:
     def release(self) -> None:
         self._call("release")
 
+    def move_obstacle(self, name: str, shift) -> None:
+        self._call("move_obstacle", name, shift)
+
     def close(self) -> None:
         if self._process.is_alive():
             try:
@@ -129,7 +132,7 @@ def _serve(conn, scene, stiffness) -> None:
         "play": live.play, "pause": live.pause,
         "reset": lambda: _light(live.reset()),
         "grab": lambda point, stiffness: _grab_info(live.grab(point, stiffness)),
-        "drag": live.drag, "release": live.release,
+        "drag": live.drag, "release": live.release, "move_obstacle": live.move_obstacle,
     }
     try:
         while True:

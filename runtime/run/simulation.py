@@ -462,6 +462,26 @@ class Simulation:
             self._released_work = getattr(self, "_released_work", 0.0) + self.ctx.grab.work
             self.ctx.grab = None
 
+    def move_obstacle(self, name: str, shift) -> None:
+        """Translate the obstacle `name` by `shift` [m] from where its motion has it, from the next step
+        on (a viewer's mouse moving a tool). Penalty contact only: an IPC obstacle may not jump between
+        steps, which could carry it through the body."""
+        contact = getattr(self.model, "contact", None)
+        if self.ctx is None:
+            raise TensormassError("Simulation.move_obstacle: call start() first")
+        obstacles = {o.name: o for o in getattr(contact, "obstacles", None) or []}
+        if name not in obstacles:
+            raise TensormassError(f"Simulation.move_obstacle: no obstacle {name!r} (the scene's: "
+                                  f"{', '.join(obstacles) or 'none'})")
+        if contact.method != "penalty":
+            raise TensormassError(f"Simulation.move_obstacle: contact.method = {contact.method!r} obstacles move "
+                                  "by their motion only (a jump between steps could cross the body); use "
+                                  "contact.method = \"penalty\"")
+        d = np.asarray(shift, dtype=float).reshape(-1)
+        if d.size != 3 or not np.all(np.isfinite(d)):
+            raise TensormassError(f"Simulation.move_obstacle: shift must be 3 finite numbers, got {list(d)}")
+        obstacles[name].shift = tuple(float(x) for x in d)
+
     def _loop(self) -> None:
         self._begin()
         for k in range(1, self.integrator.n_steps + 1):

@@ -62,6 +62,31 @@ def test_the_view_draws_the_body_and_a_mouse_drag_pulls_it():
         viewer.picture.close()
 
 
+def test_a_mouse_drag_on_the_tool_moves_it_into_the_body():
+    with Live(Scene.from_toml(str(LIVE.parent / "live_tool.toml"))) as live:
+        viewer = Viewer(live, size=(480, 320))
+        live.step(60)                                     # settled under gravity
+        viewer.picture.plotter.view_xz()                  # from the front: the screen's up is z
+        viewer.image()
+        tip = np.array([0.0, -0.015, 0.034])              # on the probe's front face
+        x, y = viewer.picture.display_of(tip)
+        assert not viewer.press(x, y + 400)               # nothing there
+        assert viewer.press_tool(x, y)                    # ctrl + left button on the tool
+        rest = live.snapshot().probes["pole"][2]
+        pixels = y - viewer.picture.display_of(tip - [0.0, 0.0, 0.003])[1]    # 3 mm on the screen
+        for i in range(1, 11):
+            viewer.move(x, y - pixels * i / 10)           # down the screen
+            live.step(4)
+        viewer.release()                                  # the tool stays where it was left
+        live.step(20)
+        shift = np.asarray(live.sim.model.contact.obstacles[0].shift)
+        assert np.isclose(shift[2], -0.003, rtol=0.05) and abs(shift[0]) + abs(shift[1]) < 1e-3 * abs(shift[2])
+        assert live.snapshot().tools["tool"][2] > 0      # touching: the organ pushes back
+        assert live.snapshot().probes["pole"][2] < rest - 1e-4
+        assert "tool" in viewer._status(live.snapshot())
+        viewer.picture.close()
+
+
 def test_view_screenshot_command(tmp_path):
     from tensormass.apps.cli import main
     out = tmp_path / "view.png"

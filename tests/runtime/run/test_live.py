@@ -99,3 +99,36 @@ def test_a_live_process_answers_like_a_live_here():
         with pytest.raises(TensormassError, match="drag target"):
             there.drag([0.0, 0.0])
     here.close()
+
+
+TOOL = LIVE.parent / "live_tool.toml"
+
+
+def test_a_tool_moved_by_the_mouse_presses_the_body():
+    with Live(Scene.from_toml(str(TOOL))) as live:
+        live.step(60)                                           # settled under gravity
+        rest = live.snapshot().probes["pole"][2]
+        live.move_obstacle("tool", [0.0, 0.0, -0.003])          # 3 mm down: 2.5 mm into the pole
+        live.step(1)
+        reach = 0.001 * np.linalg.norm(np.ptp(live.sim.model.mesh.points, axis=0))
+        tool = live.sim.model.contact.obstacles[0]
+        assert np.isclose(-tool.shift[2], reach)                # a bounded walk per step
+        live.step(80)
+        snap = live.snapshot("displacement")
+        assert np.isclose(tool.shift[2], -0.003)
+        assert snap.probes["pole"][2] < rest - 0.0007           # pressed down
+        assert snap.tools["tool"][2] > 0                        # the organ pushes the tool up
+        assert np.isclose(snap.obstacles[0][:, 2].min(), 0.0305 - 0.003)
+        with pytest.raises(TensormassError, match="no obstacle 'knife'"):
+            live.move_obstacle("knife", [0.0, 0.0, 0.0])
+        live.reset()
+        assert live.sim.model.contact.obstacles[0].shift is None
+
+
+def test_an_ipc_obstacle_is_not_moved_by_the_mouse():
+    pytest.importorskip("ipctk")
+    from tensormass.runtime.run.simulation import Simulation
+    sim = Simulation(Scene.from_toml(str(LIVE.parents[1] / "contact" / "tool_indent.toml")), output=False)
+    sim.start()
+    with pytest.raises(TensormassError, match="move by their motion only"):
+        sim.move_obstacle("tool", [0.0, 0.0, -0.001])
