@@ -607,10 +607,12 @@ def _pad(points: np.ndarray) -> np.ndarray:
 def cmd_view(args) -> int:
     """tensormass view SCENE: serve the live view until Ctrl-C (or write a still with --screenshot)."""
     from ..runtime.run.live import Live
+    from ..runtime.run.live_process import LiveProcess
     from ..runtime.scene.scene import Scene
     require_view()
     scene = Scene.from_toml(args.scene)
-    live = Live(scene, stiffness=args.stiffness)
+    # a still is made here; a served view steps in a process of its own (runtime.run.live_process)
+    live = (Live if args.screenshot else LiveProcess)(scene, stiffness=args.stiffness)
     viewer = Viewer(live, field=args.field, fps=args.fps, speed=None if args.fast else 1.0)
     if args.screenshot:
         from ..runtime.run.picture import check_png_path
