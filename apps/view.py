@@ -31,12 +31,10 @@ import numpy as np
 
 from ..runtime.base.errors import TensormassError
 
-__all__ = ["Viewer", "Picture", "view_fields", "require_view"]
+__all__ = ["Viewer", "Picture", "require_view", "cmd_view", "add_view_command"]
 
 _NEEDS = "the live view needs pyvista and trame: pip install 'tensormass[view]'"
 _VIEWERS = itertools.count()
-# Scalar fields the view colours by: the displacement's magnitude, then those the kernels give (runtime.physics.fields).
-_CANDIDATES = ("von_mises", "pressure", "energy_density", "det_F_min", "principal_stretches")
 _BACKGROUND = (0.97, 0.97, 0.97)
 
 
@@ -53,22 +51,8 @@ def require_view():
     return _pyvista(), get_server
 
 
-def view_fields(model) -> list:
-    """The fields the view offers for this model: 'displacement', then the scalar stress and strain
-    fields its kernels evaluate."""
-    from ..runtime.physics import fields as _fields
-    names = ["displacement"]
-    for name in _CANDIDATES:
-        try:
-            _fields.check_available(model, (name,), {})
-        except TensormassError:
-            continue
-        names.append(name)
-    return names
-
-
 class Picture:
-    """The VTK scene of one model: its surface deformed and coloured, the probes, the grab, the obstacles.
+    """The VTK scene of one body: its surface deformed and coloured, the probes, the grab, the obstacles.
     Only the thread that serves the view touches it (VTK is not thread-safe)."""
 
     def __init__(self, body: dict, field: str = "displacement", size=(960, 640)):
@@ -483,10 +467,10 @@ class Viewer:
                 v3.VBtn("Reset", click=reset, id="reset")
                 v3.VBtn("Release", click=self.release, id="release")
                 v3.VSwitch(v_model=("grab_mode",), label="grab", id="grab", hide_details=True, density="compact",
-                           color="red", style="max-width: 110px; margin-left: 12px")
+                           color="red", style="max-width: 120px; margin-left: 12px")
                 if self.picture.obstacle_actors:
                     v3.VSwitch(v_model=("tool_mode",), label="tool", id="tool", hide_details=True,
-                               density="compact", color="blue", style="max-width: 110px")
+                               density="compact", color="blue", style="max-width: 120px; margin-left: 8px")
                 v3.VSelect(v_model=("field",), items=("fields",), id="field", hide_details=True, density="compact",
                            style="max-width: 220px; margin-left: 12px")
             with layout.content:

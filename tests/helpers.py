@@ -188,3 +188,17 @@ def device_params() -> list:
 def to_host(a) -> np.ndarray:
     """A numpy copy of a numpy or CuPy array."""
     return np.asarray(a.get() if hasattr(a, "get") else a)
+
+
+# The organ stepped live (examples/organ/live.toml: tetra10, budgeted implicit Euler) and its pole.
+LIVE_SCENE = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples" / "organ" / "live.toml"
+LIVE_POLE = np.array([0.0, 0.0, 0.03])
+
+
+def live_scene(path=LIVE_SCENE, **solver):
+    """The live organ's Scene (or another scene file's), with these [solver] keys changed."""
+    from tensormass.runtime.scene.scene import Scene
+    scene = Scene.from_toml(str(path))
+    for key, value in solver.items():
+        setattr(scene.solver, key, value)
+    return scene

@@ -1,7 +1,8 @@
 """The live view (apps/view.py, tensormass[view]): the body is drawn, a drag with the mouse pulls it,
 and in a real browser (headless Chromium driven by Playwright) the page shows the body, a shift-drag
 moves the probe toward the dragged point and Pause stops the time. Skipped without pyvista and trame;
-the browser test also without Playwright or Chromium (.ci/run installs both for the heavy step)."""
+the browser test also without Playwright or Chromium. Heavy: CI's heavy step installs tensormass[view],
+Playwright and Chromium and runs them (.ci/run); the README's quick suite has none of them."""
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,8 @@ BACKGROUND = np.array([247, 247, 247])
 
 if not pyvista_usable():
     pytest.skip("pyvista cannot render off-screen here", allow_module_level=True)
+
+pytestmark = pytest.mark.heavy
 
 
 def body_share(img) -> float:
@@ -97,7 +100,6 @@ def test_view_screenshot_command(tmp_path):
     assert not (tmp_path / "v.png").exists()
 
 
-@pytest.mark.heavy
 def test_the_page_in_headless_chromium():
     playwright = pytest.importorskip("playwright.sync_api")
     chromium = chromium_path()

@@ -1,25 +1,14 @@
 """The grab's spring (runtime.physics.grab) and stepping a Simulation by hand (start, advance, grab,
 drag, release): the spring's force is minus its energy's gradient and its Hessian the force's
 derivative, a run stepped by hand gives run()'s bits, and a grab pulls the body toward its target."""
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from tensormass.runtime.base.errors import RunStopped, TensormassError
 from tensormass.runtime.physics.grab import Grab, GrabError
 from tensormass.runtime.run.simulation import Simulation
-from tensormass.runtime.scene.scene import Scene
 
-LIVE = Path(__file__).resolve().parents[3] / "examples" / "organ" / "live.toml"
-POLE = np.array([0.0, 0.0, 0.03])
-
-
-def scene(**solver):
-    sc = Scene.from_toml(str(LIVE))
-    for key, value in solver.items():
-        setattr(sc.solver, key, value)
-    return sc
+from helpers import LIVE_POLE as POLE, live_scene as scene
 
 
 @pytest.fixture(scope="module")

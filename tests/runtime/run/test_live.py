@@ -2,7 +2,6 @@
 play(speed=1) keeps to real time, a drag walks the grab's target a cell at a time, reset starts over,
 and a live run in a child process answers like one in this process."""
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,15 +11,7 @@ from tensormass.runtime.run.live import Live
 from tensormass.runtime.run.live_process import LiveProcess
 from tensormass.runtime.scene.scene import Scene
 
-LIVE = Path(__file__).resolve().parents[3] / "examples" / "organ" / "live.toml"
-POLE = np.array([0.0, 0.0, 0.03])
-
-
-def scene(**solver):
-    sc = Scene.from_toml(str(LIVE))
-    for key, value in solver.items():
-        setattr(sc.solver, key, value)
-    return sc
+from helpers import LIVE_POLE as POLE, LIVE_SCENE as LIVE, live_scene as scene
 
 
 def test_pause_stops_the_time_and_reset_starts_over():
