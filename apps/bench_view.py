@@ -63,6 +63,9 @@ def bench(scene_path=None, seconds: float = 5.0, fps: float = 20.0, browser: boo
     from ..runtime.run.live import Live
     from ..runtime.run.live_process import LiveProcess
     from .view import Viewer
+    if scene_path is None and not DEFAULT_SCENE.is_file():
+        raise TensormassError("bench view: give a scene file; the default, examples/organ/live.toml, is in a "
+                              "checkout, not in an installed package")
     scene = Scene.from_toml(str(scene_path or DEFAULT_SCENE))
     out = {"scene": scene.name, "seconds": seconds, "fps": fps}
     live = LiveProcess(scene)
@@ -130,10 +133,24 @@ def _browser_phase(viewer, live, seconds) -> dict:
 
             result = _phase(live, seconds, watch)
             result["frames_per_second"] = box["frames"] / result["seconds"]
+            # the page really shows the body: a measure of a blank view would mean nothing
+            result["body_on_page"] = _body_share(page.screenshot(clip=page.locator("#render").bounding_box()))
+            if result["body_on_page"] < 0.05:
+                raise TensormassError(f"bench view: the page shows no body ({100 * result['body_on_page']:.1f} % of "
+                                      "its pixels); the pictures did not reach the browser")
             return result
         finally:
             browser.close()
             viewer.close_server()
+
+
+def _body_share(png: bytes) -> float:
+    """The share of a screenshot's pixels that are not the view's background."""
+    import io
+    import numpy as np
+    from PIL import Image
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    return float((np.abs(img - 247).sum(axis=2) > 30).mean())
 
 
 def print_report(out: dict) -> None:

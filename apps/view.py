@@ -237,7 +237,7 @@ class Viewer:
     image() give pictures (a script or a test that wants no server)."""
 
     def __init__(self, live, *, field: str = "displacement", fps: float = 20.0, speed: float | None = 1.0,
-                 size=(960, 640), curves_every: float = 0.5):
+                 size=(960, 640), curves_every: float = 1.0):
         if not (float(fps) > 0):
             raise TensormassError(f"view: fps must be > 0, got {fps!r}")
         self.live, self.fps, self.speed = live, float(fps), speed
@@ -512,8 +512,14 @@ class Viewer:
             state.status_text = self._status(snap)
             state.playing = snap.status == "playing"
 
+    @property
+    def _curves(self) -> _Curves:
+        if getattr(self, "_curves_figure", None) is None:
+            self._curves_figure = _Curves()
+        return self._curves_figure
+
     async def _refresh_loop(self) -> None:
-        """At most fps pictures a second, each of the latest snapshot; the curves twice a second."""
+        """At most fps pictures a second, each of the latest snapshot; the curves every curves_every seconds."""
         curves_at, cost = 0.0, 0.0
         while True:
             # at least as long as the last refresh took between two: the page's events (the mouse, the
@@ -526,7 +532,7 @@ class Viewer:
                 if self.curves_every and now - curves_at >= self.curves_every:
                     curves_at = now
                     with self.server.state:
-                        self.server.state.curves = _curves_png(self.live.snapshot(curves=True))
+                        self.server.state.curves = self._curves.png(self.live.snapshot(curves=True))
             except Exception as exc:         # a drawing error must not end the page's loop silently
                 with self.server.state:
                     self.server.state.status_text = f"view error: {exc}"
@@ -555,31 +561,44 @@ class Viewer:
         self.picture.close()
 
 
-def _curves_png(snap) -> str:
-    """The probes' vertical displacement and the grab's force against time, as a data URL (matplotlib)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-    curves = snap.curves
-    fig = Figure(figsize=(3.2, 3.6), dpi=90)
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    t = curves.get("time", np.zeros(0))
-    for name, values in curves.items():
-        if name.endswith(" uz") or (name.endswith(" uy") and f"{name[:-3]} uz" not in curves):
-            ax1.plot(t, np.asarray(values) * 1e3, label=name)
-    ax1.set_ylabel("probe [mm]")
-    if ax1.lines:
-        ax1.legend(fontsize=7)
-    ax2.plot(t, curves.get("grab force", np.zeros_like(t)), color="tab:red")
-    ax2.set_ylabel("grab force [N]")
-    ax2.set_xlabel("time [s]")
-    for ax in (ax1, ax2):
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+class _Curves:
+    """The probes' vertical displacement and the grab's force against time, as a PNG data URL. One
+    matplotlib figure, kept: each redraw only moves the lines' data (a new figure and its layout cost
+    as much as the body's picture)."""
+
+    def __init__(self):
+        import matplotlib
+        matplotlib.use("Agg")
+        from matplotlib.figure import Figure
+        self.fig = Figure(figsize=(3.2, 3.6), dpi=90)
+        self.probes, self.force = self.fig.subplots(2, 1, sharex=True)
+        self.probes.set_ylabel("probe [mm]")
+        self.force.set_ylabel("grab force [N]")
+        self.force.set_xlabel("time [s]")
+        for ax in (self.probes, self.force):
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+        self.force_line, = self.force.plot([], [], color="tab:red")
+        self.lines = {}
+        self.fig.tight_layout()
+
+    def png(self, snap) -> str:
+        curves = snap.curves
+        t = np.asarray(curves.get("time", np.zeros(0)))
+        every = max(1, len(t) // 400)                # at most ~400 points a line
+        for name, values in curves.items():
+            if name.endswith(" uz") or (name.endswith(" uy") and f"{name[:-3]} uz" not in curves):
+                if name not in self.lines:
+                    self.lines[name], = self.probes.plot([], [], label=name)
+                    self.probes.legend(fontsize=7)
+                self.lines[name].set_data(t[::every], np.asarray(values)[::every] * 1e3)
+        self.force_line.set_data(t[::every], np.asarray(curves.get("grab force", np.zeros_like(t)))[::every])
+        for ax in (self.probes, self.force):
+            ax.relim()
+            ax.autoscale_view()
+        buf = io.BytesIO()
+        self.fig.savefig(buf, format="png")
+        return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
 def _pad(points: np.ndarray) -> np.ndarray:
@@ -596,7 +615,8 @@ def cmd_view(args) -> int:
     require_view()
     scene = Scene.from_toml(args.scene)
     # a still is made here; a served view steps in a process of its own (runtime.run.live_process)
-    live = (Live if args.screenshot else LiveProcess)(scene, stiffness=args.stiffness)
+    live = Live(scene, stiffness=args.stiffness) if args.screenshot else \
+        LiveProcess(scene, stiffness=args.stiffness, threads=args.threads)
     viewer = Viewer(live, field=args.field, fps=args.fps, speed=None if args.fast else 1.0)
     if args.screenshot:
         from ..runtime.run.picture import check_png_path
@@ -628,6 +648,8 @@ def add_view_command(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="step as fast as possible (default: real time, dt per dt)")
     p.add_argument("--play", action="store_true", help="start playing at once")
     p.add_argument("--stiffness", type=float, help="the grab's spring [N/m] (default: 0.3 x the body's own where grabbed)")
+    p.add_argument("--threads", type=int, default=1, help="the steps' threads (default 1: the other cores draw "
+                   "and serve the pictures)")
     p.add_argument("--screenshot", metavar="PNG", help="no server: step --steps steps, draw the view to PNG and exit")
     p.add_argument("--steps", type=int, default=0, help="steps before --screenshot (default 0)")
     p.set_defaults(run=cmd_view)

@@ -170,3 +170,14 @@ def _png(data: bytes):
     import io
     from PIL import Image
     return Image.open(io.BytesIO(data)).convert("RGB")
+
+
+def test_bench_view_reports_each_phase_against_the_alone_one(tmp_path):
+    from tensormass.apps.cli import main
+    out = tmp_path / "view.json"
+    assert main(["bench", "view", str(LIVE), "--seconds", "0.5", "--no-browser", "--json", str(out)]) == 0
+    import json
+    data = json.loads(out.read_text())
+    assert data["alone"]["steps"] > 0 and data["drawn"]["frames_per_second"] > 0
+    assert np.isclose(data["drawn"]["slowdown"], data["alone"]["steps_per_second"] / data["drawn"]["steps_per_second"])
+    assert data["browser"] == {"skipped": "not asked"}
