@@ -102,8 +102,8 @@ class Live:
         self._curves = {}
         self._mouse = None
         self._tools = {}                     # obstacle name -> the shift the mouse wants
-        self._record()
         self._publish()
+        self._record()
 
     def snapshot(self, field: str | None = None, curves: bool = False) -> Snapshot:
         """The state after the last step (a new object each step; safe to keep and read anywhere).
@@ -140,8 +140,10 @@ class Live:
         status = "stopped" if self._stopped else ("playing" if self.playing else "paused")
         contact = (sim._history.last.get("contact") if sim.step else None) or {}
         tools = {name: np.asarray(o["force"], dtype=float) for name, o in (contact.get("obstacles") or {}).items()}
+        dofs = sim.dofs                      # one copy of the state: the displacement is its first columns
         self._snapshot = Snapshot(
-            step=sim.step, time=sim.time, displacement=sim.displacement, dofs=sim.dofs, probes=sim.probes(),
+            step=sim.step, time=sim.time, displacement=np.array(sim.model.split_dofs(dofs.ravel())[0]), dofs=dofs,
+            probes=sim.probes(),
             status=status, message=self._stopped, step_wall=float(np.mean(self._walls)) if self._walls else 0.0,
             grab=g, model=sim.model, tools=tools,
             version=self._model_changes(sim.model))
@@ -154,14 +156,14 @@ class Live:
         return self._changes
 
     def _record(self) -> None:
-        """One row of the curves: time, each probe's components, the grab's force, the energies."""
-        sim = self.sim
-        row = {"time": sim.time}
-        for name, value in sim.probes().items():
+        """One row of the curves from the snapshot just published: time, each probe's components, the
+        grab's force, the kinetic energy."""
+        snap, sim = self._snapshot, self.sim
+        row = {"time": snap.time}
+        for name, value in snap.probes.items():
             for c, x in zip("xyz", value):
                 row[f"{name} u{c}"] = x
-        grab = sim.ctx.grab
-        row["grab force"] = 0.0 if grab is None else float(np.linalg.norm(grab.force(sim.ctx.u)))
+        row["grab force"] = 0.0 if snap.grab is None else float(np.linalg.norm(snap.grab["force"]))
         last = sim._history.last if sim.step else {}
         row["kinetic energy"] = last.get("kinetic") or 0.0
         for key, x in row.items():
@@ -191,8 +193,8 @@ class Live:
             self._publish()
             raise
         self._walls.append(time.perf_counter() - start)
-        self._record()
         self._publish()
+        self._record()
 
     def _follow_mouse(self) -> None:
         """Move the grab's target toward the mouse by at most the grabbed cell's size."""

@@ -144,7 +144,7 @@ def test_the_page_in_headless_chromium():
             target = held.grab["target"] - start
             moved = np.array(held.probes["pole"]) + POLE - start
             assert moved @ target > 0.3 * target @ target  # the probe followed the dragged point
-            for _ in range(30):                           # released with the button
+            for _ in range(100):                          # released with the button
                 if live.snapshot().grab is None:
                     break
                 page.wait_for_timeout(100)
