@@ -224,11 +224,12 @@ def _block_colours(cells, block):
 
 @njit(cache=True, nogil=True)
 def _gather(U, cells, start, stop, ue):
-    """ue[e - start] = U[cells[e]] for e in [start, stop)."""
+    """ue[e - start] = U[cells[e]] for e in [start, stop) (the first ue.shape[2] dofs of each node: a
+    solid's cells beside shells use their nodes' displacement only)."""
     for e in range(start, stop):
         for a in range(cells.shape[1]):
             node = cells[e, a]
-            for d in range(U.shape[1]):
+            for d in range(ue.shape[2]):
                 ue[e - start, a, d] = U[node, d]
 
 
@@ -315,7 +316,8 @@ class _Plan:
         self.cells = np.ascontiguousarray(part.cells_active, dtype=np.int64)
         self.dofs = np.ascontiguousarray(part.dofs_active, dtype=np.int64)
         self.D = np.ascontiguousarray(part.D_active, dtype=np.float64)
-        self.nd, self.k, self.dpn = k.n_dofs, k.n_nodes, dofs_per_node
+        # dofs of a node the kernel reads: the model's, or a solid's 3 of the 6 a node beside shells carries
+        self.nd, self.k, self.dpn = k.n_dofs, k.n_nodes, k.n_dofs // k.n_nodes
         # A hand-written kernel (runtime.kernels.custom_kernels) has no generated module to write into
         # buffers: it is called through its own methods, on the whole part at once.
         self.generic = getattr(k, "module", None) is None
@@ -344,10 +346,11 @@ class _Plan:
         self.flags = np.zeros(self.n, dtype=np.int32)
         self.energy = np.zeros(self.n)
         # one node-blocked map serves the buffered scatter and the fused kernels
-        self.blocks = _node_blocks(pos, dofs_per_node, blocks) if self.n else None
+        self.blocks = _node_blocks(pos, self.dpn, blocks) if self.n else None
         if callable(self.pos):
             self.pos = self.pos() if self.blocks is None else None
-        self.fused = _fused(k) if self.blocks is not None else None
+        # the generated fused functions read and write the global arrays with the kernel's own stride
+        self.fused = _fused(k) if self.blocks is not None and self.dpn == dofs_per_node else None
         self._scratch_f = None
         self._buffers = []
 
@@ -536,7 +539,7 @@ class Assembler:
             return
         U = u.reshape(self.model.n_points, self.model.dofs_per_node)
         D, cells, dofs, pos, flags, B = plan.D, plan.cells, plan.dofs, plan.pos, plan.flags, plan.block
-        blocks, dpn = plan.blocks, self.model.dofs_per_node
+        blocks, dpn = plan.blocks, plan.dpn
         if plan.fused is not None and not project and what in ("forces_and_stiffness", "stiffness"):
             self._evaluate_fused(plan, what, U, f, data)
             return
@@ -704,8 +707,7 @@ class Assembler:
         _scatter_block_K(data, np.zeros((1, nd, nd)), np.zeros((1, nd, nd), dtype=self.pattern.index_dtype), 0, 1)
         plan = self.plans[0]
         if plan.blocks is not None:
-            _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.blocks,
-                                   self.model.dofs_per_node, 0, 1)
+            _scatter_block_K_nodes(data, np.zeros((1, nd, nd)), plan.blocks, plan.dpn, 0, 1)
         self.constant_stiffness()            # Hooke parts: their one assembly belongs to setup
 
 

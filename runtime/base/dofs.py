@@ -2,12 +2,18 @@
 
     n = dofs_per_node(mesh)                 # mesh.dim for solids; the element table's count otherwise
     table = node_dofs(cells, n)             # (n_cells, k * n) global dofs, node-major
+    table = node_dofs(cells, n, used=3)     # a solid's cells in a mesh whose nodes carry 6: their first 3
     disp, extra = split_nodal(U, mesh.dim)  # U: (n_points, n) -> displacement and extra point fields
 
 Dofs are node-major: dof = node * dofs_per_node + component.  Where a node carries at
 least `dim` dofs, the first `dim` are its displacement (a shell's rotations follow);
 with fewer (a scalar-dof element: a spring chain in one direction, a potential) the
 nodal values are not a displacement at all and are written as their own field.
+
+A mesh may mix shells (6 dofs: displacement and rotation) with solids (3: displacement).  Every
+node then carries 6 dofs; a solid's cells use the first 3 of each of their nodes, and the rotations
+that no shell cell uses are held (the model fixes every dof no cell uses).  One count per node
+keeps dof = node * dofs_per_node + component, which the outputs, the loads and contact read.
 """
 from __future__ import annotations
 
@@ -25,7 +31,8 @@ SCALAR_FIELD = "dofs"
 
 
 def dofs_per_node(mesh) -> int:
-    """Dofs per node of a mesh: one count for the whole mesh (a mixed count is refused for now)."""
+    """Dofs per node of a mesh: its cells' count, or the largest where every count holds the
+    displacement (shells beside solids); counts below the dimension do not mix with others."""
     counts: dict = {}
     for block in mesh.blocks:
         el = _types.get(block.type)
@@ -33,17 +40,19 @@ def dofs_per_node(mesh) -> int:
         counts.setdefault(n, []).append(block.type)
     if not counts:
         return int(mesh.dim)
-    if len(counts) > 1:
+    if len(counts) > 1 and min(counts) < mesh.dim:
         which = "; ".join(f"{', '.join(dict.fromkeys(t))}: {n}" for n, t in sorted(counts.items()))
         raise TensormassError(f"the mesh mixes element types with different dofs per node ({which}); "
-                              "one count per mesh is supported")
-    return next(iter(counts))
+                              "scalar dofs mix with no other count")
+    return max(counts)
 
 
-def node_dofs(cells: np.ndarray, n: int) -> np.ndarray:
-    """(n_cells, k * n) global dofs of the cells' nodes, node-major."""
+def node_dofs(cells: np.ndarray, n: int, used: int | None = None) -> np.ndarray:
+    """(n_cells, k * used) global dofs of the cells' nodes, node-major: the first `used` (default
+    all n) of each node's n dofs."""
     cells = np.asarray(cells)
-    return (cells[:, :, None] * n + np.arange(n)).reshape(len(cells), cells.shape[1] * n)
+    used = n if used is None else int(used)
+    return (cells[:, :, None] * n + np.arange(used)).reshape(len(cells), cells.shape[1] * used)
 
 
 def split_nodal(U: np.ndarray, dim: int) -> tuple:

@@ -36,7 +36,7 @@ from .container import NODES_PER_CELL
 from .faces import boundary_rows, face_table
 from .mesh_groups import FACE_CORNERS, cell_dim, group_label
 
-__all__ = ["solid_dim", "BOX_TOLERANCE", "box_tolerance", "box_bounds", "box_contains", "region_mask", "material_mask",
+__all__ = ["material_dims", "BOX_TOLERANCE", "box_tolerance", "box_bounds", "box_contains", "region_mask", "material_mask",
            "may_cover", "assign_materials", "material_groups", "check_unused_materials", "prescribed_values",
            "switch_applies", "reachable_laws", "switch_parameters", "find_group", "known_regions",
            "region_cell_masks", "region_nodes", "region_faces", "selection_nodes"]
@@ -94,9 +94,9 @@ def known_regions(mesh, dims=None) -> str:
     groups = [g for g in getattr(mesh, "groups", ()) if dims is None or g.dim in dims]
     groups = sorted(groups, key=lambda g: (-g.dim, g.id if g.id is not None else 1 << 62, g.name or ""))
     text = ", ".join(group_label(g) for g in groups)
-    if dims is None or solid_dim(mesh) in dims:
+    if dims is None or set(material_dims(mesh)) & set(dims):
         tags = sorted({int(t) for b in mesh.blocks if b.tags is not None for t in np.unique(b.tags)}
-                      - {g.id for g in getattr(mesh, "groups", ()) if g.dim == solid_dim(mesh)})
+                      - {g.id for g in getattr(mesh, "groups", ()) if g.dim in material_dims(mesh)})
         if tags:
             text += (", " if text else "") + "cell tags " + ", ".join(map(str, tags))
     return text or "none (the mesh has no groups or tags)"
@@ -129,21 +129,27 @@ def find_group(mesh, region, key: str = "region", dims=None, what: str = "region
     return group
 
 
-def solid_dim(mesh) -> int:
-    """The dimension of the cells materials model: the mesh's, or 2 for shells (their groups of
-    triangles select materials as volume groups do for solids)."""
-    return 2 if any(b.type == "shell" for b in mesh.blocks) else mesh.dim
+def material_dims(mesh) -> tuple:
+    """The dimensions of the groups that select the cells materials model: the mesh's for solids,
+    2 for shells (their groups of triangles select materials as volume groups do for solids), both
+    for shells beside solids (runtime.mesh.shells_and_solids)."""
+    shells = any(b.type == "shell" for b in mesh.blocks)
+    others = any(b.type != "shell" for b in mesh.blocks)
+    return (mesh.dim, 2) if shells and others else (2,) if shells else (mesh.dim,)
 
 
 def region_cell_masks(mesh, region, key: str = "region") -> list:
     """Per block, the solid cells a material's region selects: "all", an element type, an integer
     (a volume group's id, else a cell tag), or the name of a volume group (of shells: of triangles)."""
     gid = _as_id(region)
-    dim = solid_dim(mesh)
+    dims = material_dims(mesh)
     if region == "all" or (isinstance(region, str) and region in NODES_PER_CELL) or \
-            (gid is not None and not any(g.id == gid and g.dim == dim for g in getattr(mesh, "groups", ()))):
+            (gid is not None and not any(g.id == gid and g.dim in dims for g in getattr(mesh, "groups", ()))):
         return [region_mask(b, region) for b in mesh.blocks]
-    group = find_group(mesh, region, key, dims=(dim,), what="a material (it selects cells)")
+    group = find_group(mesh, region, key, dims=dims, what="a material (it selects cells)")
+    if not group.cell_ids.size:
+        raise SceneError(f"{key}: region {group_label(group)} holds no cells (a boundary group); a material "
+                         f"needs a group of cells: {known_regions(mesh, dims)}")
     out, start = [], 0
     for b in mesh.blocks:
         ids = group.cell_ids[(group.cell_ids >= start) & (group.cell_ids < start + len(b))] - start

@@ -333,7 +333,7 @@ class Model:
         for (element, law, quad), members in material_groups(self.mesh, self.materials, index).items():
             cells = np.vstack([self.mesh.blocks[b].cells[ids] for b, ids, _ in members])
             cell_ids = np.concatenate([offsets[b] + ids for b, ids, _ in members])
-            dofs = node_dofs(cells, self.dofs_per_node)
+            dofs = node_dofs(cells, self.dofs_per_node, self._element_dofs(element))
             rho = np.concatenate([np.full(len(ids), float(self.materials[m].density)) for _, ids, m in members])
             branches = None
             if _viscous_members(self.materials, members):   # laws/viscous.py: the step energy's kernel
@@ -505,11 +505,12 @@ class Model:
                                                     mesh=self.mesh)
         target = value.ravel()
         self.n_user_fixed = int(np.count_nonzero(~np.isnan(target)))
-        # nodes no cell uses carry no mass and no stiffness: pin them so systems stay regular
-        used = np.zeros(self.n_points, bool)
+        # dofs no cell uses (the nodes of no cell; a solid node's rotations beside shells) carry no
+        # mass and no stiffness: pin them so systems stay regular
+        used = np.zeros(self.n_dofs, bool)
         for part in self.parts:
-            used[part.cells.ravel()] = True
-        orphan = node_dofs(np.flatnonzero(~used)[:, None], self.dofs_per_node).ravel()
+            used[part.dofs.ravel()] = True
+        orphan = np.flatnonzero(~used)
         target[orphan] = np.where(np.isnan(target[orphan]), 0.0, target[orphan])
         dofs = np.flatnonzero(~np.isnan(target))
         return dofs, target[dofs]
@@ -588,13 +589,7 @@ class Model:
             value = float(load.value)
             if not np.isfinite(value):
                 raise TensormassError(f"loads.pressure[{i}].value must be a finite number, got {load.value!r}")
-            if self.shells:
-                faces = self._shells_in(load, f"loads.pressure[{i}]")
-            elif getattr(load, "region", None) is not None:
-                faces = region_faces(self.mesh, load.region, load.box, key=f"loads.pressure[{i}].region",
-                                     tol=self.box_tol, what="a pressure")
-            else:
-                faces = self._faces_in(load.box)
+            faces = self._pressure_faces(load, f"loads.pressure[{i}]")
             if not faces:
                 where = f"in region {load.region!r}" if getattr(load, "region", None) is not None else f"inside box {load.box!r}"
                 raise TensormassError(f"loads.pressure[{i}]: no boundary face {where}")
@@ -633,13 +628,46 @@ class Model:
         """A shell mesh: its triangles are the surface (pressure acts on them, against their normal)."""
         return any(b.type == "shell" for b in self.mesh.blocks)
 
+    @property
+    def solids(self) -> bool:
+        """The mesh has cells other than shells (alone, or beside shells: runtime.mesh.shells_and_solids)."""
+        return any(b.type != "shell" for b in self.mesh.blocks)
+
+    def _pressure_faces(self, load, key) -> dict:
+        """{face type: faces} a pressure acts on: shell triangles (of a shell group; every one in the box),
+        the solid's boundary faces (of a boundary or volume group; every one in the box), or, with no
+        region beside solids, both."""
+        region = getattr(load, "region", None)
+        whole = region in (None, "all")
+        on_shells = self.shells and (whole or self._shell_group(region, f"{key}.region") is not None)
+        faces = self._shells_in(load, key) if on_shells else {}
+        if self.solids and (whole or not on_shells):
+            solid = region_faces(self.mesh, None if whole else region, load.box, key=f"{key}.region",
+                                 tol=self.box_tol, what="a pressure")
+            for kind, rows in solid.items():
+                faces[kind] = np.vstack([faces[kind], rows]) if kind in faces else rows
+        return faces
+
+    def _shell_group(self, region, key):
+        """The shell group a region names (refused when it names none on a shell mesh), or None beside
+        solids when the region is one of the solid's."""
+        if not self.solids:
+            return find_group(self.mesh, region, key, dims=(2,), what="a shell load")
+        group = find_group(self.mesh, region, key)
+        return group if group.dim == 2 and group.cell_ids.size else None
+
     def _shells_in(self, load, key) -> dict:
         """{"triangle": the shell cells of the load's region (a group of the file's triangles) whose nodes
         are all inside its box (all cells without either)}."""
-        cells = np.vstack([b.cells for b in self.mesh.blocks if b.type == "shell"])
+        start = 0
+        for b in self.mesh.blocks:
+            if b.type == "shell":
+                cells = b.cells                   # one shell block (runtime.mesh.shells_and_solids)
+                break
+            start += len(b)
         if getattr(load, "region", None) not in (None, "all"):
-            group = find_group(self.mesh, load.region, f"{key}.region", dims=(2,), what="a shell load")
-            cells = cells[group.cell_ids[group.cell_ids < len(cells)]]
+            ids = self._shell_group(load.region, f"{key}.region").cell_ids - start
+            cells = cells[ids[(ids >= 0) & (ids < len(cells))]]
         if load.box is not None:
             inside = box_contains(load.box, self.mesh.points, self.box_tol)
             cells = cells[inside[cells].all(axis=1)]
@@ -674,17 +702,24 @@ class Model:
         """(n_active, k, dofs_per_node) nodal dofs of a part's active elements (pair with part.D_active).
 
         out: a preallocated (n_active, k, dofs_per_node) float64 array to gather into (no allocation)."""
-        U = u.reshape(self.n_points, self.dofs_per_node)
+        U = self.part_nodal(part, u)
         if out is None:
             return U[part.cells_active]
         return np.take(U, part.cells_active, axis=0, out=out, mode="clip")   # "clip": unbuffered
+
+    def part_nodal(self, part: Part, u: np.ndarray) -> np.ndarray:
+        """(n_points, w) the nodal dofs a part's cells read: all dofs_per_node, or beside shells a
+        solid's displacement only (a view: a kernel reading it whole takes a copy)."""
+        U = u.reshape(self.n_points, self.dofs_per_node)
+        width = part.dofs.shape[1] // part.cells.shape[1]
+        return U if width == self.dofs_per_node else U[:, :width]
 
     def warm_up(self, outputs=None) -> None:
         """Compile (or load from numba's cache) the kernel outputs the solver will call: outputs, or
         warm_up_outputs(part) of each part (numba compiles each output on its first call, 6 to 40 s
         cold; a C kernel is compiled whole when loaded, so this only loads it)."""
         for part in self.parts:
-            D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, self.dofs_per_node))
+            D, u = part.D[:1], np.zeros((1, part.kernel.n_nodes, part.kernel.n_dofs // part.kernel.n_nodes))
             for name in outputs or self.warm_up_outputs(part):
                 getattr(part.kernel, name)(D, u)
         for c in self.couplings:                  # the formulations' measure kernels (energy: every call)
@@ -768,12 +803,19 @@ class Model:
 
     def _check_kernel_dofs(self, kernel, element: str, cells) -> None:
         """A kernel (generated or registered) must fit the element type and the model's dof layout."""
-        k = cells.shape[1]
-        if kernel.n_nodes != k or kernel.n_dofs != k * self.dofs_per_node or kernel.dim != self.dim:
+        k, per_node = cells.shape[1], self._element_dofs(element)
+        if kernel.n_nodes != k or kernel.n_dofs != k * per_node or kernel.dim != self.dim:
             raise TensormassError(
                 f"kernel {kernel!r} for {element}: {kernel.n_nodes} nodes, {kernel.n_dofs} dofs in {kernel.dim}D; "
-                f"the model needs {k} nodes, {k * self.dofs_per_node} dofs ({self.dofs_per_node} per node) "
+                f"the model needs {k} nodes, {k * per_node} dofs ({per_node} per node) "
                 f"in {self.dim}D")
+
+    def _element_dofs(self, element: str) -> int:
+        """Dofs per node an element type's cells use: its own count (a solid's: the dimension), the
+        first of the node's dofs_per_node (runtime.base.dofs)."""
+        n = _element_types.get(element).dofs_per_node
+        return self.dofs_per_node if n is None and self.dofs_per_node < self.dim else \
+            min(self.dofs_per_node, self.dim if n is None else int(n))
 
     @staticmethod
     def _check_discrete(materials, adapt) -> None:

@@ -86,7 +86,7 @@ def part_min_det_F(model, part, u: np.ndarray) -> np.ndarray | None:
     """min det F per active element of a part; None for kernels without stored shape gradients."""
     if getattr(part.kernel, "recompute", False) or not hasattr(part.kernel, "min_det_F"):
         return None                        # (a hand-written kernel may have no inversion check)
-    return part.kernel.min_det_F(part.D_active, u, cells=part.cells_active)
+    return part.kernel.min_det_F(part.D_active, model.part_nodal(part, u), cells=part.cells_active)
 
 
 def min_det_F(model, u: np.ndarray) -> tuple:

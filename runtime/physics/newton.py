@@ -131,7 +131,7 @@ class Context:
         """Raise InvertedElementError if u inverts an element of a law undefined there."""
         for p in self.model.parts:
             if laws.get(p.law).requires_positive_J and p.n_active and hasattr(p.kernel, "inverted"):
-                bad = p.kernel.inverted(p.D_active, u, cells=p.cells_active)
+                bad = p.kernel.inverted(p.D_active, self.model.part_nodal(p, u), cells=p.cells_active)
                 if bad.any():
                     raise InvertedElementError(f"law {p.law!r}: det F <= 0", p.cell_ids_active[bad])
 

@@ -32,6 +32,7 @@ from .formulation_check import check_element as check_formulation_element
 from ..mesh.regions import (assign_materials, box_contains, box_tolerance, check_unused_materials,
     prescribed_values, reachable_laws, region_faces, selection_nodes, switch_parameters)
 from ..mesh import surfaces
+from ..mesh.shells_and_solids import has_volume_cells, read_shells_and_solids
 from ..mesh.solids import ball_tetrahedra
 from ... import laws as _laws
 
@@ -119,6 +120,10 @@ def shell_mesh(spec):
     elif spec.generate == "sphere":
         points, triangles = surfaces.icosphere(spec.radius, spec.subdivisions)
     tags, groups = None, []
+    if spec.file is not None and has_volume_cells(spec.file):     # shells beside the file's solids
+        mesh, notes = read_shells_and_solids(spec.file)
+        mesh.notes = [f"mesh.file: {note}" for note in notes]
+        return mesh
     if spec.file is not None:   # windings made to agree across shared edges; the notes say what was turned
         points, triangles, notes, (tags, groups) = surfaces.read_shell_triangles(spec.file, with_groups=True)
     points = np.asarray(points, float) + np.asarray(spec.origin, float)[:3] if spec.file is None else points

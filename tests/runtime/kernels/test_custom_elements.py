@@ -362,15 +362,19 @@ def test_six_dofs_per_node_bar_with_torsion(torsion3d, tmp_path):
         Model(mesh, [_material()], fixed=[Fixed(box=_box(mesh.points[2]), components=(3,), displacement=(0, 0, 0))])
 
 
-def test_mixed_dofs_per_node_are_refused(bar3d):
+def test_scalar_dofs_do_not_mix_with_displacements(bar3d):
+    """A count below the dimension (no displacement) mixes with no other; 6 beside 3 is the largest."""
     elements.unregister("line")
-    elements.register(_line(6, 3))
+    elements.register(_line(1, 3))
     mesh = Mesh(np.vstack([np.eye(3), [[0, 0, 0]], [[2.0, 0, 0]]]),
                 [CellBlock("tetra", [[3, 0, 1, 2]]), CellBlock("line", [[0, 4]])])
-    with pytest.raises(TensormassError, match=r"mixes element types with different dofs per node \(tetra: 3; line: 6\)"):
+    with pytest.raises(TensormassError, match=r"mixes element types with different dofs per node \(line: 1; tetra: 3\)"):
         dofs_per_node(mesh)
     with pytest.raises(TensormassError, match="different dofs per node"):
         Model(mesh, [_material()])
+    elements.unregister("line")
+    elements.register(_line(6, 3))
+    assert dofs_per_node(mesh) == 6
 
 
 def test_split_nodal_layouts():
