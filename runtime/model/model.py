@@ -386,6 +386,10 @@ class Model:
             name = formulation_name(getattr(self.materials[m], "formulation", "displacement"), key)
             if name != "displacement":
                 _check_formulation_element(key, name, element)      # the scene's check, for Models built directly
+                if self.shells:
+                    raise TensormassError(f"{key} = {name!r}: the locking-free formulations are not available for "
+                                          "solids beside shells (their volumetric terms read 3 dofs a node); use "
+                                          "formulation = \"displacement\" there")
                 rows.append(np.arange(start, start + len(ids)))
                 mats.append(np.full(len(ids), m))
                 names.add(name)

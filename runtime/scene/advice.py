@@ -129,7 +129,7 @@ NOT_CURED = {("mean_dilatation", "wedge"): "under a load in the plane of prism l
                                            "(P1/P0 triangles' one volume constraint per cell)"}
 
 
-def _locking(key, material, element) -> str | None:
+def _locking(key, material, element, beside_shells: bool = False) -> str | None:
     formulation = getattr(material, "formulation", DEFAULT_FORMULATION)
     nu = poisson_ratio(material)
     if element not in LINEAR_ELEMENTS or nu is None or nu < LOCKING_NU:
@@ -140,7 +140,8 @@ def _locking(key, material, element) -> str | None:
                 f"their plane: {NOT_CURED[formulation, element]}; use formulation = \"{choice}\"")
     if formulation != "displacement":
         return None
-    fix = (f"use formulation = \"{choice}\"" if choice is not None else
+    fix = ("the locking-free formulations are not available beside shells: refine the mesh or use quadratic "
+           "elements" if beside_shells else f"use formulation = \"{choice}\"" if choice is not None else
            "no locking-free formulation exists for it: refine the mesh or use quadratic elements")
     return (f"{key}: nu = {nu:.4g} on {element} with the displacement formulation locks (too stiff); {fix}")
 
@@ -150,12 +151,13 @@ def scene_advice(scene, mesh=None) -> list:
     mesh = scene.load_mesh() if mesh is None else mesh
     backend = getattr(scene.solver, "backend", "numba")
     advice = list(getattr(mesh, "notes", ()))        # what reading the mesh changed (shell windings)
+    beside_shells = any(b.type == "shell" for b in mesh.blocks)
     for i, element_types in sorted(_modelled_elements(scene, mesh).items()):
         material, key = scene.materials[i], f"material[{i}]"
         if laws.is_discrete(material.law):
             continue        # springs: no locking, no quadrature; a singular lattice is refused by the solve check
         for element in element_types:
-            text = _locking(key, material, element)
+            text = _locking(key, material, element, beside_shells)
             if text is not None:
                 advice.append(text)
             count = spurious_modes(element, material.law, material.quadrature, backend)

@@ -191,3 +191,11 @@ def test_a_pressure_on_the_shells_and_one_on_the_solid(tmp_path):
     # a closed sphere under uniform pressure: no net force on it
     f = model.pressure.forces(np.zeros(model.n_dofs)).reshape(-1, 6)
     assert np.abs(f[n_solid:, :3].sum(axis=0)).max() < 1e-12
+
+
+def test_a_formulation_beside_shells_is_refused(tmp_path):
+    text = SCENE.replace("nu = 0.4\n", 'nu = 0.45\nformulation = "nodal_pressure"\n', 1)
+    scene, _, _ = _scene(tmp_path, text)
+    with pytest.raises(TensormassError, match=r"material\[0\].formulation = 'nodal_pressure': the locking-free "
+                                              "formulations are not available for solids beside shells"):
+        Model.from_scene(scene)
