@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from . import fetal_head as head
-from .mesh_tools import surface_of_model
 
 HEAD_SIZE = 0.007             # m: 2 148 triangles
 FLOOR_SIZE = 0.009            # m: 2 919 tetrahedra
