@@ -1,15 +1,15 @@
 """The reduced birth scene (thesis ch. 8): the fetal-head shell pushed through a soft pelvic floor.
 
-    python -m tensormass.apps.birth examples/birth/birth.msh [--head-size 0.0047] [--floor-size 0.007]
+    python -m tensormass.apps.birth examples/birth/birth.msh [--head-size 0.007] [--floor-size 0.009]
     python -m tensormass.apps.birth report [--json FILE] [--steps N]
     from tensormass.apps.birth import make, run_birth, report
 
 One mesh holds both bodies (runtime.mesh.shells_and_solids): the head of apps.fetal_head, a CST-DKT
 shell in its zones, and below it the pelvic floor, a tetrahedral ring of soft neo-Hookean tissue
-(Table 8.4's abdomen and pelvic floor: C10 = 5 kPa) held at its outer rim.  Periodic uterine
-pressure on the head's upper half pushes its vertex into the ring's opening, narrower than the head,
-and the frictionless IPC contact between the shell and the ring (runtime.contact) stretches the ring
-around it.  The file's groups (gmsh 2.2 ascii):
+(Table 8.4's abdomen and pelvic floor: C10 = 5 kPa) held at its outer rim.  The scene's periodic
+push on the head's neck (the fundus' push through the fetal body) drives its vertex into the ring's
+opening, narrower than the head, and the frictionless IPC contact between the shell and the ring
+(runtime.contact) stretches the ring around it.  The file's groups (gmsh 2.2 ascii):
 
     suture band45 band40 band30 skull neck   1-6   the head's shell zones (apps.fetal_head)
     floor                                    1     the ring's tetrahedra (volume group)
