@@ -129,18 +129,19 @@ def measure(model, displacement, bodies, pairs) -> dict:
 def run_birth(scene=SCENE, steps: int | None = None, every: int = 1, progress=None) -> dict:
     """The scene (by default the checkout's examples/birth/birth.toml), stepped by hand: a row every
     `every` steps, the mean descent speed and the diameters' changes."""
-    from ..runtime.base.errors import TensormassError
     from ..runtime.run.simulation import Simulation
     from ..runtime.scene.scene import Scene
     if not Path(scene).is_file():
+        from ..runtime.base.errors import TensormassError
         raise TensormassError(f"the birth scene {scene} is not there: run from a checkout, or give the scene "
                               "file (examples/birth/birth.toml)")
-    text = Path(scene).read_text(encoding="utf-8")
-    sim = Simulation(Scene.from_string(text, base_dir=Path(scene).parent, name="birth"), output=False)
+    sim = Simulation(Scene.from_toml(scene), output=False)
     model = sim.model
     total = model.solver.steps if steps is None else int(steps)
     bodies = _bodies(model)
-    pairs = head.landmarks(model.mesh.points)       # the head's nodes come first in the file
+    head_nodes = bodies[0]
+    pairs = {k: (int(head_nodes[a]), int(head_nodes[b]))
+             for k, (a, b) in head.landmarks(model.mesh.points[head_nodes]).items()}
     rows = [{"step": 0, "time": 0.0, **measure(model, np.zeros((model.n_points, 3)), bodies, pairs)}]
     sim.start()
     try:
@@ -190,7 +191,12 @@ def main(argv=None) -> int:
     p.add_argument("--scene", default=str(SCENE), help="report: the scene (default: the checkout's example)")
     args = p.parse_args(argv)
     if args.path == "report":
-        out = report(args.scene, args.steps, args.json)
+        from ..runtime.base.errors import TensormassError
+        try:
+            out = report(args.scene, args.steps, args.json)
+        except TensormassError as exc:          # a refused scene, or a step that failed: its reason
+            print(f"birth: {exc}")
+            return 1
         return 0 if out["status"] == "ok" else 1
     path = make(args.path, args.head_size, args.floor_size)
     print(f"wrote {path}")

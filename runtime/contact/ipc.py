@@ -168,7 +168,7 @@ class IPCContact(ContactBase):
         d2 = self.collisions(V).compute_minimum_distance(self.mesh, V) if self.dmin > 0 else np.inf
         if np.isfinite(d2) and np.sqrt(d2) <= self.dmin:
             raise TensormassError(f"contact: at rest a pair is {np.sqrt(d2):.3g} m apart, within the shells' "
-                                  f"half thickness {self.dmin:.3g} m; move the obstacles clear")
+                                  f"half thickness {self.dmin:.3g} m; move the obstacles (or the mesh's bodies) clear")
 
     def _body_faces(self):
         return np.ascontiguousarray(self.surface.triangles, dtype=np.int32)

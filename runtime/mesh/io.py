@@ -34,7 +34,7 @@ def _int_tags(values, name: str) -> np.ndarray:
     return tags.astype(np.int64)
 
 
-def read_mesh(path) -> Mesh:
+def read_mesh(path, read=None) -> Mesh:
     """Read a mesh with meshio: the solid cells of its dimension, and its groups.
 
     Tags come from cell data 'gmsh:physical', 'cell_tags' or 'medit:ref'; the
@@ -45,10 +45,11 @@ def read_mesh(path) -> Mesh:
     (boundary triangles/quads/lines/vertices) are kept there, in the groups they
     belong to; those in no group are dropped.  gmsh files (first line
     $MeshFormat) get their node order converted to VTK's where it differs
-    (GMSH_TO_VTK: the prism; meshio converts the quadratic types itself).
+    (GMSH_TO_VTK: the prism; meshio converts the quadratic types itself).  read: the file's
+    read_meshio(path) when the caller has it already.
     """
     path = Path(path)
-    m = read_meshio(path)
+    m = read_meshio(path) if read is None else read
     dims = {cb.type: topological_dim(cb.type) for cb in m.cells}
     unknown = sorted(t for t, d in dims.items() if d is None)
     if unknown:

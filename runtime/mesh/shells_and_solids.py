@@ -1,6 +1,8 @@
 """A file that holds shells beside solids: its volume cells are solids, its free triangles are shells.
 
-    mesh, notes = read_shells_and_solids(path)     # [mesh] file = ... with element = "shell"
+    read = read_meshio(path)                       # runtime.mesh.io
+    if has_volume_cells(read):                     # [mesh] file = ... with element = "shell"
+        mesh, notes = read_shells_and_solids(path, read)
 
 With element = "shell", a file's triangles are shells.  When the file also has volume cells (a
 gmsh file with a volume group and surface groups), those are solids of the same mesh, and a
@@ -19,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import io as mesh_io
-from .container import CellBlock, Mesh, MeshError
+from .container import CellBlock, Mesh, MeshError, topological_dim
 from .faces import boundary_faces
 from .mesh_groups import Group
 from .surfaces import orient_triangles
@@ -27,15 +29,15 @@ from .surfaces import orient_triangles
 __all__ = ["read_shells_and_solids", "has_volume_cells"]
 
 
-def has_volume_cells(path) -> bool:
-    """Whether a mesh file has 3D cells (read once more by the caller: meshio reads are cheap next to it)."""
-    from .container import topological_dim
-    return any(topological_dim(cb.type) == 3 for cb in mesh_io.read_meshio(path).cells)
+def has_volume_cells(read) -> bool:
+    """Whether a file, as runtime.mesh.io.read_meshio read it, has 3D cells."""
+    return any(topological_dim(cb.type) == 3 for cb in read.cells)
 
 
-def read_shells_and_solids(path) -> tuple[Mesh, list]:
-    """(mesh, notes): the file's solids, its boundary groups, and its free triangles as shells."""
-    solids = mesh_io.read_mesh(path)
+def read_shells_and_solids(path, read=None) -> tuple[Mesh, list]:
+    """(mesh, notes): the file's solids, its boundary groups, and its free triangles as shells
+    (read: the file's read_meshio(path) when the caller has it)."""
+    solids = mesh_io.read_mesh(path, read)
     if solids.dim != 3:
         raise MeshError(f"{path}: shells beside solids need a 3D mesh")
     on_boundary = {tuple(sorted(nodes[:3])) for _, _, nodes in boundary_faces(solids)}

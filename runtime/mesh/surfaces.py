@@ -336,14 +336,14 @@ def shell_groups(m, n_triangles: int) -> tuple:
     return tags, groups
 
 
-def read_shell_triangles(path, with_groups: bool = False):
+def read_shell_triangles(path, with_groups: bool = False, read=None):
     """(points (n, 3), triangles, notes) of a surface mesh file read as shells (with_groups: and
     shell_groups' (tags, groups), so that regions select its triangles): its 3-node triangles
     (curves and points left out, unused points dropped), duplicated triangles refused by id, each
     surface's windings made to agree (orient_triangles; its notes say what was turned).  Volume
     cells and quadratic triangles are refused by name.  Reading goes through mesh.read_meshio (a
-    broken .msh file is refused naming the broken part)."""
-    m = read_meshio(path)
+    broken .msh file is refused naming the broken part; read: its result when the caller has it)."""
+    m = read_meshio(path) if read is None else read
     blocks = [np.asarray(cb.data, dtype=np.int64) for cb in m.cells if cb.type == "triangle"]
     other = sorted({cb.type for cb in m.cells if cb.type != "triangle" and topological_dim(cb.type) not in (0, 1)})
     if other:

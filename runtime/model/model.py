@@ -32,7 +32,7 @@ from ..assembly import loads as _loads
 from ..physics.integrators import outputs_for
 from ..assembly.mass import MassMatrix
 from ..assembly.pressure import FollowerPressure
-from ..mesh.container import Mesh
+from ..mesh.container import Mesh, block_offsets
 from ..mesh.checks import check_mesh
 from ..physics.motion import Motion
 from ..mesh.probes import PointProbe, locate_point
@@ -643,8 +643,9 @@ class Model:
         region beside solids, both."""
         region = getattr(load, "region", None)
         whole = region in (None, "all")
-        on_shells = self.shells and (whole or self._shell_group(region, f"{key}.region") is not None)
-        faces = self._shells_in(load, key) if on_shells else {}
+        group = None if whole or not self.shells else self._shell_group(region, f"{key}.region")
+        on_shells = self.shells and (whole or group is not None)
+        faces = self._shells_in(load, group) if on_shells else {}
         if self.solids and (whole or not on_shells):
             solid = region_faces(self.mesh, None if whole else region, load.box, key=f"{key}.region",
                                  tol=self.box_tol, what="a pressure")
@@ -660,17 +661,13 @@ class Model:
         group = find_group(self.mesh, region, key)
         return group if group.dim == 2 and group.cell_ids.size else None
 
-    def _shells_in(self, load, key) -> dict:
-        """{"triangle": the shell cells of the load's region (a group of the file's triangles) whose nodes
-        are all inside its box (all cells without either)}."""
-        start = 0
-        for b in self.mesh.blocks:
-            if b.type == "shell":
-                cells = b.cells                   # one shell block (runtime.mesh.shells_and_solids)
-                break
-            start += len(b)
-        if getattr(load, "region", None) not in (None, "all"):
-            ids = self._shell_group(load.region, f"{key}.region").cell_ids - start
+    def _shells_in(self, load, group) -> dict:
+        """{"triangle": the shell cells of a group (None: all) whose nodes are all inside the load's box
+        (all of them without one)}."""
+        i = next(i for i, b in enumerate(self.mesh.blocks) if b.type == "shell")   # one shell block
+        cells = self.mesh.blocks[i].cells
+        if group is not None:
+            ids = group.cell_ids - block_offsets(self.mesh)[i]
             cells = cells[ids[(ids >= 0) & (ids < len(cells))]]
         if load.box is not None:
             inside = box_contains(load.box, self.mesh.points, self.box_tol)
@@ -817,9 +814,8 @@ class Model:
     def _element_dofs(self, element: str) -> int:
         """Dofs per node an element type's cells use: its own count (a solid's: the dimension), the
         first of the node's dofs_per_node (runtime.base.dofs)."""
-        n = _element_types.get(element).dofs_per_node
-        return self.dofs_per_node if n is None and self.dofs_per_node < self.dim else \
-            min(self.dofs_per_node, self.dim if n is None else int(n))
+        el = _element_types.get(element)
+        return el.n_dofs(self.dim) // el.n_nodes
 
     @staticmethod
     def _check_discrete(materials, adapt) -> None:

@@ -120,12 +120,14 @@ def shell_mesh(spec):
     elif spec.generate == "sphere":
         points, triangles = surfaces.icosphere(spec.radius, spec.subdivisions)
     tags, groups = None, []
-    if spec.file is not None and has_volume_cells(spec.file):     # shells beside the file's solids
-        mesh, notes = read_shells_and_solids(spec.file)
-        mesh.notes = [f"mesh.file: {note}" for note in notes]
-        return mesh
-    if spec.file is not None:   # windings made to agree across shared edges; the notes say what was turned
-        points, triangles, notes, (tags, groups) = surfaces.read_shell_triangles(spec.file, with_groups=True)
+    if spec.file is not None:
+        read = mesh_io.read_meshio(spec.file)
+        if has_volume_cells(read):                 # shells beside the file's solids
+            mesh, notes = read_shells_and_solids(spec.file, read)
+            mesh.notes = [f"mesh.file: {note}" for note in notes]
+            return mesh
+        # windings made to agree across shared edges; the notes say what was turned
+        points, triangles, notes, (tags, groups) = surfaces.read_shell_triangles(spec.file, with_groups=True, read=read)
     points = np.asarray(points, float) + np.asarray(spec.origin, float)[:3] if spec.file is None else points
     mesh = Mesh(points, [CellBlock("shell", np.asarray(triangles, dtype=np.int64), tags)], groups)
     mesh.notes = [f"mesh.file: {note}" for note in notes] if spec.file is not None else []

@@ -46,3 +46,11 @@ def test_the_first_steps_push_the_head_into_the_opening():
 def test_without_the_scene_file_the_report_says_so(tmp_path):
     with pytest.raises(TensormassError, match="birth scene .* is not there"):
         birth.run_birth(tmp_path / "none.toml", steps=1)
+
+
+def test_a_run_that_fails_says_why_and_exits_1(tmp_path, capsys):
+    text = SCENE.read_text().replace('file = "birth.msh"', f'file = "{SCENE.with_suffix(".msh").as_posix()}"')
+    scene = tmp_path / "birth.toml"
+    scene.write_text(text.replace("newton_max_iterations = 60", "newton_max_iterations = 1"))
+    assert birth.main(["report", "--scene", str(scene), "--steps", "2"]) == 1
+    assert "birth: step 1 failed" in capsys.readouterr().out

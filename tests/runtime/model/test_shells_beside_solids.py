@@ -199,3 +199,26 @@ def test_a_formulation_beside_shells_is_refused(tmp_path):
     with pytest.raises(TensormassError, match=r"material\[0\].formulation = 'nodal_pressure': the locking-free "
                                               "formulations are not available for solids beside shells"):
         Model.from_scene(scene)
+
+
+def test_the_inversion_checks_read_each_solid_node_at_its_own_dofs(tmp_path):
+    """One solid node pushed through its cells' opposite faces is seen inverted by Newton's check and by
+    the health monitor; the same push on its rotation dofs (which the solid does not read) is not."""
+    from tensormass.runtime.base.errors import InvertedElementError
+    from tensormass.runtime.physics import health
+    from tensormass.runtime.physics.newton import Context
+    scene, n_solid, _ = _scene(tmp_path)
+    model = Model.from_scene(scene)
+    node = int(np.argmin(np.linalg.norm(model.mesh.points[:n_solid] - [0.0, 0.0, -0.025], axis=1)))
+    assert node > 0
+    ctx = Context(model)
+    u = np.zeros((model.n_points, 6))
+    u[node, 3:] = 0.2                                  # rotations: no cell of the solid reads them
+    ctx.check_not_inverted(u.ravel())
+    assert health.min_det_F(model, u.ravel())[0] > 0.999
+    u[node] = 0.0
+    u[node, 2] = 0.2                                   # 8 cell sizes up through its neighbours
+    with pytest.raises(InvertedElementError):
+        ctx.check_not_inverted(u.ravel())
+    low, inverted = health.min_det_F(model, u.ravel())
+    assert low < 0
